@@ -1,0 +1,10 @@
+"""sb3-mpail: Model Predictive Adversarial Imitation Learning (MPAIL) for Stable-Baselines3."""
+
+import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0 with gymnasium)
+from sb3_mpail.demos import ExpertTransitions, load_demos
+from sb3_mpail.mpail import MPAIL
+from sb3_mpail.policies import MlpMPPI, MPPIPolicy
+
+__version__ = "0.1.0"
+
+__all__ = ["MPAIL", "ExpertTransitions", "MPPIPolicy", "MlpMPPI", "load_demos", "__version__"]

@@ -1,0 +1,104 @@
+"""
+Observation-only expert demonstrations: load them from any of the formats users have, as ``(s, s')`` pairs.
+
+Accepted: a sequence of imitation ``Trajectory`` objects, imitation ``Transitions``, an ``.npz`` file, or a
+directory written by ``imitation.data.serialize.save``. Only observations are read; expert actions are never
+needed. An ``.npz`` file holds ``obs`` of shape ``(n_demos, T + 1, obs_dim)`` (equal-length episodes), or ``obs``
+of shape ``(sum of T_i + 1, obs_dim)`` with ``episode_lengths`` giving each episode's ``T_i + 1`` observations.
+"""
+
+import os
+from pathlib import Path
+from typing import List, NamedTuple, Sequence, Union
+
+import numpy as np
+from gymnasium import spaces
+from imitation.data.types import Trajectory, Transitions
+
+DemoSource = Union[str, os.PathLike, Sequence[Trajectory], Transitions]
+
+
+class ExpertTransitions(NamedTuple):
+    """Expert state transitions ``(s, s')``, float32 arrays of shape ``(n_transitions, obs_dim)``."""
+
+    observations: np.ndarray
+    next_observations: np.ndarray
+
+
+def _pairs_from_episodes(episodes: Sequence[np.ndarray]) -> ExpertTransitions:
+    episodes = [np.asarray(episode, dtype=np.float32) for episode in episodes]
+    for index, episode in enumerate(episodes):
+        if episode.ndim != 2 or len(episode) < 2:
+            raise ValueError(
+                f"Demo episode {index} must hold at least two observations as a (T + 1, obs_dim) array; "
+                f"got shape {episode.shape}."
+            )
+    return ExpertTransitions(
+        np.concatenate([episode[:-1] for episode in episodes]), np.concatenate([episode[1:] for episode in episodes])
+    )
+
+
+def _episodes_from_npz(path: Path) -> List[np.ndarray]:
+    with np.load(path, allow_pickle=False) as data:
+        if "obs" not in data:
+            raise ValueError(f"Demo file {path} has no 'obs' array (it has {sorted(data.files)}).")
+        observations = data["obs"]
+        if "episode_lengths" in data:
+            if observations.ndim != 2:
+                raise ValueError(f"Demo file {path}: with episode_lengths, obs must be 2-D; got shape {observations.shape}.")
+            lengths = data["episode_lengths"].astype(int)
+            if lengths.sum() != len(observations):
+                raise ValueError(
+                    f"Demo file {path}: episode_lengths sum to {lengths.sum()}, but obs has {len(observations)} rows."
+                )
+            return np.split(observations, np.cumsum(lengths)[:-1])
+    if observations.ndim != 3:
+        raise ValueError(
+            f"Demo file {path}: obs must have shape (n_demos, T + 1, obs_dim), or come with episode_lengths; "
+            f"got shape {observations.shape}."
+        )
+    return list(observations)
+
+
+def load_demos(demos: DemoSource, observation_space: spaces.Box) -> ExpertTransitions:
+    """
+    Reads expert observations and checks them against the environment's observation space.
+
+    :param demos: trajectories, transitions, an ``.npz`` path or an imitation ``serialize`` directory
+    :param observation_space: the environment's observation space
+    :return: the expert's ``(s, s')`` pairs
+    :raises FileNotFoundError: the path does not exist
+    :raises ValueError: shapes differ from the observation space, values are not finite, or the data is empty
+    """
+    if isinstance(demos, (str, os.PathLike)):
+        path = Path(demos)
+        if not path.exists():
+            raise FileNotFoundError(f"Demo path {path} does not exist.")
+        if path.is_dir():
+            from imitation.data import serialize
+
+            transitions = _pairs_from_episodes([trajectory.obs for trajectory in serialize.load(path)])
+        else:
+            transitions = _pairs_from_episodes(_episodes_from_npz(path))
+    elif isinstance(demos, Transitions):
+        transitions = ExpertTransitions(np.asarray(demos.obs, np.float32), np.asarray(demos.next_obs, np.float32))
+    elif isinstance(demos, Sequence) and len(demos) > 0 and all(isinstance(item, Trajectory) for item in demos):
+        transitions = _pairs_from_episodes([trajectory.obs for trajectory in demos])
+    else:
+        raise TypeError(
+            "demos must be a sequence of imitation Trajectory objects, imitation Transitions, an .npz file or a "
+            f"directory saved by imitation.data.serialize; got {type(demos).__name__}."
+        )
+    expected = tuple(observation_space.shape)
+    if transitions.observations.shape[1:] != expected:
+        raise ValueError(
+            f"Demo observations have shape {transitions.observations.shape[1:]} but the environment's observation space "
+            f"has shape {expected}."
+        )
+    if len(transitions.observations) == 0:
+        raise ValueError("The demos contain no transitions.")
+    for name, array in transitions._asdict().items():
+        if not np.all(np.isfinite(array)):
+            rows = np.unique(np.nonzero(~np.isfinite(array))[0])
+            raise ValueError(f"Demo {name} contain NaN or infinite values (in {len(rows)} transitions, first at {rows[0]}).")
+    return transitions

@@ -1,0 +1,15 @@
+"""Environments for the MPAIL experiments, registered with gymnasium on import."""
+
+import gymnasium as gym
+
+from sb3_mpail.envs.navigation import NavigationEnv
+
+# Guard against re-registration warnings when the module is reloaded.
+if "sb3_mpail/Navigation-v0" not in gym.registry:
+    gym.register(
+        id="sb3_mpail/Navigation-v0",
+        entry_point="sb3_mpail.envs.navigation:NavigationEnv",
+        max_episode_steps=100,
+    )
+
+__all__ = ["NavigationEnv"]

@@ -1,0 +1,412 @@
+"""Model Predictive Adversarial Imitation Learning (Han et al., ICLR 2026) as a Stable-Baselines3 algorithm."""
+
+import io
+import math
+import os
+import pathlib
+import sys
+import time
+from typing import Any, ClassVar, Dict, Iterable, List, Tuple, Type, TypeVar, Union
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
+from stable_baselines3.common.utils import explained_variance, safe_mean
+from stable_baselines3.common.vec_env import VecEnv
+from torch.nn import functional as F
+
+from sb3_mpail.buffers import TransitionRolloutBuffer
+from sb3_mpail.demos import DemoSource, ExpertTransitions, load_demos
+from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, LearnedDynamics
+from sb3_mpail.policies import MlpMPPI, MPPIPolicy
+
+SelfMPAIL = TypeVar("SelfMPAIL", bound="MPAIL")
+
+
+class MPAIL(BaseAlgorithm):
+    """
+    Model Predictive Adversarial Imitation Learning: an MPPI planner learns its cost from observation-only demos.
+
+    Each iteration (paper Alg. 1): run the planner in the envs for ``n_steps`` per env; label every transition with
+    the learned reward ``r = d_theta(s, s')``; update the discriminator (BCE, expert vs agent) every
+    ``discriminator_update_interval`` iterations; update the value ``V_phi`` on GAE returns of the learned reward;
+    fit the dynamics model if it is learned online. There is no policy update: the policy is the planner.
+
+    Defaults follow the paper's hyperparameter table; the planner's own settings (``N``, ``H``, ``J``, ``Sigma``,
+    markup, dynamics) are ``policy_kwargs`` of :class:`~sb3_mpail.policies.MPPIPolicy`.
+
+    :param policy: ``"MlpMPPI"`` or an :class:`~sb3_mpail.policies.MPPIPolicy` subclass
+    :param env: env id, ``gym.Env`` or ``VecEnv`` (``None`` only when loading)
+    :param demos: observation-only expert demos (see :func:`~sb3_mpail.demos.load_demos`); needed to train, not to plan
+    :param n_steps: env steps per env per iteration
+    :param gamma: discount of the learned reward in the value targets
+    :param gae_lambda: GAE lambda of the value targets
+    :param n_epochs: epochs per discriminator and value update
+    :param n_minibatches: minibatches per epoch
+    :param discriminator_learning_rate: Adam learning rate of the discriminator
+    :param discriminator_betas: Adam betas of the discriminator
+    :param discriminator_l2: weight decay of the discriminator (paper: 0 in simulation, 1e-3 on real data)
+    :param discriminator_update_interval: iterations between discriminator updates (paper's 3:1 value:disc ratio)
+    :param value_learning_rate: Adam learning rate of the value
+    :param value_betas: Adam betas of the value
+    :param value_clip: clip range of the value loss around the values at collection time
+    :param max_grad_norm: gradient-norm clip of the value update
+    :param initial_temperature: MPPI temperature ``lambda_0``
+    :param temperature_decay: per-episode multiplicative decay: ``lambda = lambda_0 (1 - decay)^episodes``, counting
+        episodes per env so the schedule does not depend on ``n_envs``
+    :param min_temperature: temperature floor
+    :param stats_window_size: episodes averaged in the logged episode return
+    :param tensorboard_log: tensorboard log folder
+    :param policy_kwargs: keyword arguments of the policy (planner settings, ``dynamics``)
+    :param verbose: 0 silent, 1 training info
+    :param seed: seed of networks, environments and planner noise
+    :param device: ``"cpu"``, ``"cuda"`` or ``"auto"``
+    :param _init_setup_model: build the networks at construction (``False`` when loading)
+    """
+
+    policy_aliases: ClassVar[Dict[str, Type[BasePolicy]]] = {"MlpMPPI": MlpMPPI}
+    policy: MPPIPolicy
+    rollout_buffer: TransitionRolloutBuffer
+
+    def __init__(
+        self,
+        policy: Union[str, Type[MPPIPolicy]],
+        env: Union[GymEnv, str] | None,
+        demos: DemoSource | None = None,
+        n_steps: int = 200,
+        gamma: float = 0.99,
+        gae_lambda: float = 0.95,
+        n_epochs: int = 3,
+        n_minibatches: int = 3,
+        discriminator_learning_rate: float = 1e-4,
+        discriminator_betas: Tuple[float, float] = (0.5, 0.999),
+        discriminator_l2: float = 0.0,
+        discriminator_update_interval: int = 3,
+        value_learning_rate: float = 1e-3,
+        value_betas: Tuple[float, float] = (0.9, 0.999),
+        value_clip: float = 0.2,
+        max_grad_norm: float = 1.0,
+        initial_temperature: float = 1.0,
+        temperature_decay: float = 0.01,
+        min_temperature: float = 1e-5,
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        policy_kwargs: Dict[str, Any] | None = None,
+        verbose: int = 0,
+        seed: int | None = None,
+        device: Union[th.device, str] = "auto",
+        _init_setup_model: bool = True,
+    ):
+        super().__init__(
+            policy=policy,
+            env=env,
+            learning_rate=value_learning_rate,
+            policy_kwargs=policy_kwargs,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            verbose=verbose,
+            device=device,
+            support_multi_env=True,
+            seed=seed,
+        )
+        self.n_steps = n_steps
+        self.gamma = gamma
+        self.gae_lambda = gae_lambda
+        self.n_epochs = n_epochs
+        self.n_minibatches = n_minibatches
+        self.discriminator_learning_rate = discriminator_learning_rate
+        self.discriminator_betas = discriminator_betas
+        self.discriminator_l2 = discriminator_l2
+        self.discriminator_update_interval = discriminator_update_interval
+        self.value_learning_rate = value_learning_rate
+        self.value_betas = value_betas
+        self.value_clip = value_clip
+        self.max_grad_norm = max_grad_norm
+        self.initial_temperature = initial_temperature
+        self.temperature_decay = temperature_decay
+        self.min_temperature = min_temperature
+        self.episodes_completed = 0
+        self.n_iterations = 0
+        self.expert: ExpertTransitions | None = None
+        self._plan: th.Tensor | None = None
+        if env is not None:
+            self._check_spaces()
+            self._default_dynamics()
+        if _init_setup_model:
+            self._setup_model()
+        if demos is not None:
+            self.set_demos(demos)
+
+    def _check_spaces(self) -> None:
+        if not isinstance(self.action_space, spaces.Box):
+            raise ValueError(
+                "MPAIL plans continuous actions (a gymnasium.spaces.Box); "
+                f"this environment's action space is {self.action_space}."
+            )
+        if not isinstance(self.observation_space, spaces.Box) or len(self.observation_space.shape) != 1:
+            raise ValueError(
+                f"MPAIL plans on flat Box observations; this environment's observation space is {self.observation_space}."
+            )
+
+    def _default_dynamics(self) -> None:
+        """Fills in the planning model of environments whose dynamics the package knows (e.g. ``Pendulum-v1``)."""
+        if self.policy_kwargs.get("dynamics") is not None:
+            return
+        assert self.env is not None
+        spec = self.env.get_attr("spec", indices=[0])[0]
+        if spec is not None and spec.id in DEFAULT_DYNAMICS:
+            self.policy_kwargs = {**self.policy_kwargs, "dynamics": DEFAULT_DYNAMICS[spec.id]}
+
+    def _setup_model(self) -> None:
+        self._setup_lr_schedule()
+        self.set_random_seed(self.seed)
+        self.policy = self.policy_class(self.observation_space, self.action_space, **self.policy_kwargs)
+        self.policy = self.policy.to(self.device)
+        self.policy.seed(self.seed)
+        self.policy.temperature.fill_(self.temperature())
+        self.discriminator_optimizer = th.optim.Adam(
+            self.policy.discriminator.parameters(),
+            lr=self.discriminator_learning_rate,
+            betas=self.discriminator_betas,
+            weight_decay=self.discriminator_l2,
+        )
+        self.value_optimizer = th.optim.Adam(
+            self.policy.value_net.parameters(), lr=self.value_learning_rate, betas=self.value_betas
+        )
+
+    def set_random_seed(self, seed: int | None = None) -> None:
+        """Seeds python, numpy, torch, the action space, the env and the planner's noise."""
+        super().set_random_seed(seed)
+        if getattr(self, "policy", None) is not None:
+            self.policy.seed(seed)
+
+    def set_demos(self, demos: DemoSource) -> None:
+        """
+        Sets the expert demos (e.g. on a loaded model, to go on training); they are checked against the observation
+        space and never saved with the model.
+        """
+        self.expert = load_demos(demos, self.observation_space)
+
+    def temperature(self) -> float:
+        """The MPPI temperature after the episodes completed so far."""
+        episodes_per_env = self.episodes_completed / max(self.n_envs, 1)
+        return max(self.initial_temperature * (1 - self.temperature_decay) ** episodes_per_env, self.min_temperature)
+
+    def _excluded_save_params(self) -> List[str]:
+        return [*super()._excluded_save_params(), "expert", "_plan"]
+
+    def _get_torch_save_params(self) -> Tuple[List[str], List[str]]:
+        state_dicts = ["policy", "discriminator_optimizer", "value_optimizer"]
+        if isinstance(self.policy.dynamics, LearnedDynamics):
+            state_dicts.append("policy.dynamics.optimizer")
+        return state_dicts, []
+
+    def save(
+        self,
+        path: Union[str, pathlib.Path, io.BufferedIOBase],
+        exclude: Iterable[str] | None = None,
+        include: Iterable[str] | None = None,
+    ) -> None:
+        """
+        Saves the model (demos excluded). The file is written beside its destination and then renamed over it, so
+        a crash while saving never leaves a truncated checkpoint behind.
+        """
+        if isinstance(path, io.BufferedIOBase):
+            super().save(path, exclude, include)
+            return
+        destination = pathlib.Path(path)
+        if destination.suffix == "":
+            destination = destination.with_name(destination.name + ".zip")
+        destination.parent.mkdir(parents=True, exist_ok=True)
+        partial = destination.with_name(destination.name + ".partial")
+        try:
+            super().save(partial, exclude, include)
+            os.replace(partial, destination)
+        finally:
+            partial.unlink(missing_ok=True)
+
+    def learn(
+        self: SelfMPAIL,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 1,
+        tb_log_name: str = "MPAIL",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfMPAIL:
+        """
+        Trains for ``total_timesteps`` env steps (summed over envs): the last iteration collects only what is left of
+        the budget, so ``num_timesteps`` ends at ``total_timesteps`` when it is a multiple of ``n_envs``.
+        """
+        if self.expert is None:
+            raise ValueError("MPAIL needs expert demos to learn: pass demos=... to MPAIL(...) or call model.set_demos(demos).")
+        total_timesteps, callback = self._setup_learn(
+            total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
+        )
+        callback.on_training_start(locals(), globals())
+        assert self.env is not None
+        while self.num_timesteps < total_timesteps:
+            n_rollout_steps = min(self.n_steps, math.ceil((total_timesteps - self.num_timesteps) / self.env.num_envs))
+            if not self.collect_rollouts(self.env, callback, n_rollout_steps):
+                break
+            self.n_iterations += 1
+            self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
+            self.train()
+            if log_interval is not None and self.n_iterations % log_interval == 0:
+                self._dump_logs()
+        callback.on_training_end()
+        return self
+
+    def collect_rollouts(self, env: VecEnv, callback: BaseCallback, n_rollout_steps: int) -> bool:
+        """
+        Runs the planner in every env for ``n_rollout_steps`` steps, then labels the rollout with learned rewards,
+        values and GAE returns.
+
+        :return: ``False`` if a callback asked to stop training
+        """
+        assert self._last_obs is not None
+        self.policy.set_training_mode(False)
+        if getattr(self, "rollout_buffer", None) is None or self.rollout_buffer.buffer_size != n_rollout_steps:
+            self.rollout_buffer = TransitionRolloutBuffer(
+                n_rollout_steps,
+                self.observation_space,
+                self.action_space,
+                self.device,
+                self.gae_lambda,
+                self.gamma,
+                env.num_envs,
+            )
+        self.rollout_buffer.reset()
+        if self._plan is None or self._plan.shape[0] != env.num_envs:
+            self._plan = self.policy.initial_plan(env.num_envs)
+        callback.on_rollout_start()
+        for _ in range(n_rollout_steps):
+            fresh = th.as_tensor(self._last_episode_starts, device=self.device).view(-1, 1, 1)
+            self._plan = th.where(fresh, self.policy.initial_plan(env.num_envs), self._plan)
+            with th.no_grad():
+                actions, self._plan = self.policy.act(th.as_tensor(self._last_obs, device=self.device), self._plan)
+            actions = actions.cpu().numpy()
+            new_obs, _, dones, infos = env.step(actions)
+            self.num_timesteps += env.num_envs
+            callback.update_locals(locals())
+            if not callback.on_step():
+                return False
+            self._update_info_buffer(infos, dones)
+            next_obs = new_obs.copy()
+            timeouts = np.zeros(env.num_envs, dtype=np.float32)
+            for index in np.flatnonzero(dones):
+                next_obs[index] = infos[index]["terminal_observation"]
+                timeouts[index] = infos[index].get("TimeLimit.truncated", False)
+            self.rollout_buffer.add_transition(self._last_obs, actions, next_obs, self._last_episode_starts, timeouts)
+            self.episodes_completed += int(dones.sum())
+            self.policy.temperature.fill_(self.temperature())
+            self._last_obs = new_obs
+            self._last_episode_starts = dones
+        self._label_rollout(new_obs, dones)
+        callback.update_locals(locals())
+        callback.on_rollout_end()
+        return True
+
+    def _label_rollout(self, last_obs: np.ndarray, dones: np.ndarray) -> None:
+        """Learned rewards ``d_theta(s, s')``, values and GAE returns for the whole rollout in a few batched calls."""
+        buffer = self.rollout_buffer
+        shape = (buffer.buffer_size, buffer.n_envs)
+        with th.no_grad():
+            observations = th.as_tensor(buffer.flat("observations"), device=self.device)
+            next_observations = th.as_tensor(buffer.flat("next_observations"), device=self.device)
+            rewards = self.policy.discriminator(observations, None, next_observations, None)
+            next_values = self.policy.value_net(next_observations).squeeze(-1)
+            values = self.policy.value_net(observations).squeeze(-1)
+            last_values = self.policy.value_net(th.as_tensor(last_obs, device=self.device)).squeeze(-1)
+        timeouts = th.as_tensor(buffer.flat("timeouts"), device=self.device)
+        # a time-limit cut is not a real end: bootstrap it with the value of the state reached, as SB3's PPO does
+        buffer.rewards = (rewards + self.gamma * next_values * timeouts).cpu().numpy().reshape(shape)
+        buffer.values = values.cpu().numpy().reshape(shape)
+        buffer.compute_returns_and_advantage(last_values, dones)
+        self.logger.record("rollout/learned_reward_mean", rewards.mean().item())
+
+    def _minibatches(self, n_items: int) -> List[th.Tensor]:
+        batch_size = math.ceil(n_items / self.n_minibatches)
+        return list(th.randperm(n_items, device=self.device).split(batch_size))
+
+    def train(self) -> None:
+        """Discriminator update (every ``discriminator_update_interval`` iterations), value update, dynamics fit."""
+        self.policy.set_training_mode(True)
+        buffer = self.rollout_buffer
+        observations = th.as_tensor(buffer.flat("observations"), device=self.device)
+        next_observations = th.as_tensor(buffer.flat("next_observations"), device=self.device)
+        if (self.n_iterations - 1) % self.discriminator_update_interval == 0:
+            self._train_discriminator(observations, next_observations)
+        self._train_value(observations)
+        if isinstance(self.policy.dynamics, LearnedDynamics):
+            loss = self.policy.dynamics.fit(
+                buffer.flat("observations"), buffer.flat("actions"), buffer.flat("next_observations")
+            )
+            self.logger.record("train/dynamics_loss", loss)
+            self.logger.record("train/dynamics_learning_rate", self.policy.dynamics.current_learning_rate())
+        self.policy.set_training_mode(False)
+        self.logger.record("train/temperature", self.temperature())
+        self.logger.record("train/episodes", self.episodes_completed)
+
+    def _train_discriminator(self, observations: th.Tensor, next_observations: th.Tensor) -> None:
+        """BCE on logits, expert transitions labelled 1 and the agent's 0, each agent batch with as many expert pairs."""
+        assert self.expert is not None
+        expert_observations = th.as_tensor(self.expert.observations, device=self.device)
+        expert_next_observations = th.as_tensor(self.expert.next_observations, device=self.device)
+        discriminator = self.policy.discriminator
+        losses, expert_accuracies, agent_accuracies = [], [], []
+        for _ in range(self.n_epochs):
+            for batch in self._minibatches(len(observations)):
+                expert_batch = th.randint(len(expert_observations), (len(batch),), device=self.device)
+                agent_logits = discriminator(observations[batch], None, next_observations[batch], None)
+                expert_logits = discriminator(
+                    expert_observations[expert_batch], None, expert_next_observations[expert_batch], None
+                )
+                logits = th.cat((expert_logits, agent_logits))
+                labels = th.cat((th.ones_like(expert_logits), th.zeros_like(agent_logits)))
+                loss = F.binary_cross_entropy_with_logits(logits, labels)
+                self.discriminator_optimizer.zero_grad()
+                loss.backward()
+                self.discriminator_optimizer.step()
+                losses.append(loss.item())
+                expert_accuracies.append((expert_logits > 0).float().mean().item())
+                agent_accuracies.append((agent_logits < 0).float().mean().item())
+        self.logger.record("train/discriminator_loss", np.mean(losses))
+        self.logger.record("train/discriminator_accuracy", (np.mean(expert_accuracies) + np.mean(agent_accuracies)) / 2)
+        self.logger.record("train/expert_accuracy", np.mean(expert_accuracies))
+        self.logger.record("train/agent_accuracy", np.mean(agent_accuracies))
+
+    def _train_value(self, observations: th.Tensor) -> None:
+        """Clipped regression of ``V_phi`` onto the GAE returns, as PPO's value loss."""
+        buffer = self.rollout_buffer
+        returns = th.as_tensor(buffer.flat("returns"), device=self.device)
+        old_values = th.as_tensor(buffer.flat("values"), device=self.device)
+        losses = []
+        for _ in range(self.n_epochs):
+            for batch in self._minibatches(len(observations)):
+                values = self.policy.value_net(observations[batch]).squeeze(-1)
+                clipped = old_values[batch] + th.clamp(values - old_values[batch], -self.value_clip, self.value_clip)
+                loss = th.max((values - returns[batch]).square(), (clipped - returns[batch]).square()).mean()
+                self.value_optimizer.zero_grad()
+                loss.backward()
+                th.nn.utils.clip_grad_norm_(self.policy.value_net.parameters(), self.max_grad_norm)
+                self.value_optimizer.step()
+                losses.append(loss.item())
+        self.logger.record("train/value_loss", np.mean(losses))
+        self.logger.record("train/explained_variance", explained_variance(buffer.flat("values"), buffer.flat("returns")))
+
+    def _dump_logs(self) -> None:
+        assert self.ep_info_buffer is not None
+        time_elapsed = max((time.time_ns() - self.start_time) / 1e9, sys.float_info.epsilon)
+        self.logger.record("time/iterations", self.n_iterations, exclude="tensorboard")
+        if len(self.ep_info_buffer) > 0:
+            self.logger.record("rollout/ep_rew_mean", safe_mean([info["r"] for info in self.ep_info_buffer]))
+            self.logger.record("rollout/ep_len_mean", safe_mean([info["l"] for info in self.ep_info_buffer]))
+        self.logger.record("time/fps", int((self.num_timesteps - self._num_timesteps_at_start) / time_elapsed))
+        self.logger.record("time/time_elapsed", int(time_elapsed), exclude="tensorboard")
+        self.logger.record("time/total_timesteps", self.num_timesteps, exclude="tensorboard")
+        self.logger.dump(step=self.num_timesteps)

@@ -1,0 +1,33 @@
+"""Batched infinite-horizon MPPI: sampling, dynamics, costs and the planner that combines them."""
+
+from sb3_mpail.mppi.costs import TerminalValue, TransitionCost, make_transition_discriminator, make_value_network
+from sb3_mpail.mppi.dynamics import (
+    DEFAULT_DYNAMICS,
+    DYNAMICS_MODELS,
+    CallableDynamics,
+    KinematicBicycle,
+    LearnedDynamics,
+    PendulumDynamics,
+    TransitionReplayBuffer,
+    make_dynamics,
+)
+from sb3_mpail.mppi.planner import MPPIPlanner, PlanResult
+from sb3_mpail.mppi.sampling import GaussianSampler
+
+__all__ = [
+    "DEFAULT_DYNAMICS",
+    "DYNAMICS_MODELS",
+    "CallableDynamics",
+    "GaussianSampler",
+    "KinematicBicycle",
+    "LearnedDynamics",
+    "MPPIPlanner",
+    "PendulumDynamics",
+    "PlanResult",
+    "TerminalValue",
+    "TransitionCost",
+    "TransitionReplayBuffer",
+    "make_dynamics",
+    "make_transition_discriminator",
+    "make_value_network",
+]

@@ -1,0 +1,287 @@
+"""
+Dynamics models ``f(states, actions) -> next_states`` used by the planner to roll out sampled action sequences.
+
+Every model takes 2-D batches: ``states`` of shape ``(batch, state_dim)`` and ``actions`` of shape
+``(batch, action_dim)``, in the environment's own observation and action units.
+"""
+
+import math
+from typing import Any, Callable, Dict, Sequence, Union
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.torch_layers import create_mlp
+from torch import nn
+
+DynamicsFunction = Callable[[th.Tensor, th.Tensor], th.Tensor]
+
+
+class KinematicBicycle(nn.Module):
+    """
+    Kinematic bicycle for the 12-D car state ``[x, y, z, roll, pitch, yaw, vx, vy, vz, wx, wy, wz]``
+    (world-frame pose, body-frame velocities) with normalised actions ``[speed, steering]`` in ``[-1, 1]``:
+    ``v = max_speed * a0``, ``delta = max_steer * a1``, ``yaw_rate = v tan(delta) / wheelbase``, one Euler step.
+    It has no actuator lag and no tyre slip; z, roll, pitch and the other velocities are held.
+
+    :param wheelbase: distance between the axles in metres
+    :param max_speed: speed in m/s for a normalised speed action of 1
+    :param max_steer: steering angle in radians for a normalised steering action of 1
+    :param dt: time step in seconds
+    """
+
+    def __init__(self, wheelbase: float = 0.325, max_speed: float = 3.0, max_steer: float = 0.488, dt: float = 0.1):
+        super().__init__()
+        self.wheelbase = wheelbase
+        self.max_speed = max_speed
+        self.max_steer = max_steer
+        self.dt = dt
+
+    def forward(self, states: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        speed = self.max_speed * actions[:, 0]
+        yaw_rate = speed * th.tan(self.max_steer * actions[:, 1]) / self.wheelbase
+        yaw = states[:, 5]
+        next_states = states.clone()
+        next_states[:, 0] = states[:, 0] + speed * th.cos(yaw) * self.dt
+        next_states[:, 1] = states[:, 1] + speed * th.sin(yaw) * self.dt
+        # wrapped like the simulator's yaw so predicted and observed transitions live in the same space
+        next_states[:, 5] = th.remainder(yaw + yaw_rate * self.dt + math.pi, 2 * math.pi) - math.pi
+        next_states[:, 6] = speed
+        next_states[:, 7] = 0.0
+        next_states[:, 11] = yaw_rate
+        return next_states
+
+
+class PendulumDynamics(nn.Module):
+    """
+    The exact dynamics of gymnasium's ``Pendulum-v1`` on its observation ``[cos(theta), sin(theta), theta_dot]``.
+
+    :param gravity: ``g`` of the environment (gymnasium's default is 10)
+    """
+
+    max_speed = 8.0
+    max_torque = 2.0
+    dt = 0.05
+    mass = 1.0
+    length = 1.0
+
+    def __init__(self, gravity: float = 10.0):
+        super().__init__()
+        self.gravity = gravity
+
+    def forward(self, states: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        angle = th.atan2(states[:, 1], states[:, 0])
+        torque = th.clamp(actions[:, 0], -self.max_torque, self.max_torque)
+        acceleration = 3 * self.gravity / (2 * self.length) * th.sin(angle) + 3.0 / (self.mass * self.length**2) * torque
+        angular_velocity = th.clamp(states[:, 2] + acceleration * self.dt, -self.max_speed, self.max_speed)
+        angle = angle + angular_velocity * self.dt
+        return th.stack((th.cos(angle), th.sin(angle), angular_velocity), dim=1)
+
+
+class CallableDynamics(nn.Module):
+    """
+    Wraps a user's plain function ``f(states, actions) -> next_states`` (torch tensors in, tensor out).
+
+    :param function: the dynamics function; it must be picklable (cloudpickle) for ``save``/``load``
+    """
+
+    def __init__(self, function: DynamicsFunction):
+        super().__init__()
+        self.function = function
+
+    def forward(self, states: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        return self.function(states, actions)
+
+
+class TransitionReplayBuffer:
+    """
+    Fixed-capacity store of ``(s, a, s')`` from several episodes for fitting a dynamics model. Once full, new
+    transitions replace old ones at random positions (paper App. "Predictive Model Learning"), so the buffer keeps
+    a mix of recent and older behaviour instead of only the newest window.
+
+    :param capacity: maximum number of transitions kept
+    :param state_dim: size of a state
+    :param action_dim: size of an action
+    :param seed: seed of the replacement positions
+    """
+
+    def __init__(self, capacity: int, state_dim: int, action_dim: int, seed: int | None = None):
+        self.capacity = capacity
+        self.states = np.zeros((capacity, state_dim), dtype=np.float32)
+        self.actions = np.zeros((capacity, action_dim), dtype=np.float32)
+        self.next_states = np.zeros((capacity, state_dim), dtype=np.float32)
+        self.size = 0
+        self.rng = np.random.default_rng(seed)
+
+    def add(self, states: np.ndarray, actions: np.ndarray, next_states: np.ndarray) -> None:
+        n_old = self.size
+        n_appended = min(len(states), self.capacity - self.size)
+        self._write(
+            np.arange(self.size, self.size + n_appended), states[:n_appended], actions[:n_appended], next_states[:n_appended]
+        )
+        self.size += n_appended
+        # only transitions stored before this call are candidates, so the newest batch is kept whole
+        n_replacing = min(len(states) - n_appended, n_old)
+        if n_replacing > 0:
+            positions = self.rng.choice(n_old, size=n_replacing, replace=False)
+            self._write(positions, states[-n_replacing:], actions[-n_replacing:], next_states[-n_replacing:])
+
+    def _write(self, positions: np.ndarray, states: np.ndarray, actions: np.ndarray, next_states: np.ndarray) -> None:
+        self.states[positions] = states
+        self.actions[positions] = actions
+        self.next_states[positions] = next_states
+
+
+class LearnedDynamics(nn.Module):
+    """
+    Deterministic MLP model ``f_psi(s, a) -> s'`` learned online from the agent's own transitions (MPAIL-OM):
+    it predicts the normalised state change, trained with MSE and Adam, with a step learning-rate decay
+    (``lr * lr_decay ** (epochs // lr_decay_every)``, floored at ``min_learning_rate``) and a replay buffer.
+
+    :param state_dim: size of a state
+    :param action_dim: size of an action
+    :param hidden_sizes: hidden layer widths (paper: 3 x 64 for cartpole, 3 x 256 for Ant)
+    :param learning_rate: initial Adam learning rate
+    :param lr_decay: multiplicative decay of the learning rate
+    :param lr_decay_every: number of epochs between decays
+    :param min_learning_rate: learning-rate floor
+    :param buffer_size: replay buffer capacity in transitions
+    :param batch_size: minibatch size
+    :param n_epochs: passes over the buffer per call of :meth:`fit`
+    :param seed: seed of the buffer's replacement and minibatch order
+    """
+
+    def __init__(
+        self,
+        state_dim: int,
+        action_dim: int,
+        hidden_sizes: Sequence[int] = (64, 64, 64),
+        learning_rate: float = 1e-3,
+        lr_decay: float = 0.9,
+        lr_decay_every: int = 15,
+        min_learning_rate: float = 1e-6,
+        buffer_size: int = 100_000,
+        batch_size: int = 256,
+        n_epochs: int = 5,
+        seed: int | None = None,
+    ):
+        super().__init__()
+        self.net = nn.Sequential(*create_mlp(state_dim + action_dim, state_dim, list(hidden_sizes), nn.ReLU))
+        self.register_buffer("input_mean", th.zeros(state_dim + action_dim))
+        self.register_buffer("input_std", th.ones(state_dim + action_dim))
+        self.register_buffer("delta_mean", th.zeros(state_dim))
+        self.register_buffer("delta_std", th.ones(state_dim))
+        self.register_buffer("epochs_trained", th.zeros((), dtype=th.long))
+        self.learning_rate = learning_rate
+        self.lr_decay = lr_decay
+        self.lr_decay_every = lr_decay_every
+        self.min_learning_rate = min_learning_rate
+        self.batch_size = batch_size
+        self.n_epochs = n_epochs
+        self.optimizer = th.optim.Adam(self.net.parameters(), lr=learning_rate)
+        self.replay_buffer = TransitionReplayBuffer(buffer_size, state_dim, action_dim, seed)
+        self.rng = np.random.default_rng(seed)
+
+    def forward(self, states: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        inputs = (th.cat((states, actions), dim=1) - self.input_mean) / self.input_std
+        return states + self.net(inputs) * self.delta_std + self.delta_mean
+
+    def current_learning_rate(self) -> float:
+        decays = int(self.epochs_trained) // self.lr_decay_every
+        return max(self.learning_rate * self.lr_decay**decays, self.min_learning_rate)
+
+    def fit(self, states: np.ndarray, actions: np.ndarray, next_states: np.ndarray) -> float:
+        """
+        Adds transitions to the replay buffer and trains ``n_epochs`` passes over it.
+
+        :return: mean MSE (in normalised units) of the last epoch
+        """
+        self.replay_buffer.add(states, actions, next_states)
+        size = self.replay_buffer.size
+        device = self.input_mean.device
+        buffer = self.replay_buffer
+        inputs = th.as_tensor(np.concatenate((buffer.states[:size], buffer.actions[:size]), axis=1), device=device)
+        deltas = th.as_tensor(buffer.next_states[:size] - buffer.states[:size], device=device)
+        # normalisation follows the data the model has seen; a tiny floor keeps constant dimensions finite
+        self.input_mean.copy_(inputs.mean(0))
+        self.input_std.copy_(inputs.std(0, unbiased=False).clamp_min(1e-6))
+        self.delta_mean.copy_(deltas.mean(0))
+        self.delta_std.copy_(deltas.std(0, unbiased=False).clamp_min(1e-6))
+        normalized_inputs = (inputs - self.input_mean) / self.input_std
+        normalized_deltas = (deltas - self.delta_mean) / self.delta_std
+        epoch_losses = []
+        for _ in range(self.n_epochs):
+            for group in self.optimizer.param_groups:
+                group["lr"] = self.current_learning_rate()
+            order = th.as_tensor(self.rng.permutation(size), device=device)
+            epoch_losses = []
+            for start in range(0, size, self.batch_size):
+                batch = order[start : start + self.batch_size]
+                loss = nn.functional.mse_loss(self.net(normalized_inputs[batch]), normalized_deltas[batch])
+                self.optimizer.zero_grad()
+                loss.backward()
+                self.optimizer.step()
+                epoch_losses.append(loss.item())
+            self.epochs_trained += 1
+        return float(np.mean(epoch_losses))
+
+
+DYNAMICS_MODELS: Dict[str, type] = {
+    "bicycle": KinematicBicycle,
+    "pendulum": PendulumDynamics,
+    "learned": LearnedDynamics,
+}
+
+# Environments whose planning model is known, so users need not name one.
+DEFAULT_DYNAMICS: Dict[str, str] = {
+    "Pendulum-v1": "pendulum",
+    "sb3_mpail/Navigation-v0": "bicycle",
+}
+
+DynamicsSpec = Union[str, nn.Module, DynamicsFunction]
+
+
+def make_dynamics(
+    dynamics: DynamicsSpec | None,
+    observation_space: spaces.Box,
+    action_space: spaces.Box,
+    dynamics_kwargs: Dict[str, Any] | None = None,
+) -> nn.Module:
+    """
+    Builds the planner's dynamics model and checks it maps states to states of the observation's shape.
+
+    :param dynamics: a name from :data:`DYNAMICS_MODELS`, an ``nn.Module`` or a plain callable
+        ``f(states, actions) -> next_states``
+    :param observation_space: the environment's observation space (the planner's state)
+    :param action_space: the environment's action space
+    :param dynamics_kwargs: keyword arguments for a named model
+    """
+    dynamics_kwargs = dynamics_kwargs or {}
+    if dynamics is None:
+        raise ValueError(
+            "MPAIL plans through a dynamics model and none was given for this environment: pass "
+            "policy_kwargs=dict(dynamics=...) with one of "
+            f"{sorted(DYNAMICS_MODELS)}, an nn.Module or a callable f(states, actions) -> next_states."
+        )
+    if isinstance(dynamics, str):
+        if dynamics not in DYNAMICS_MODELS:
+            raise ValueError(f"Unknown dynamics model {dynamics!r}: choose one of {sorted(DYNAMICS_MODELS)}.")
+        if dynamics == "learned":
+            dynamics_kwargs = {"state_dim": observation_space.shape[0], "action_dim": action_space.shape[0], **dynamics_kwargs}
+        model = DYNAMICS_MODELS[dynamics](**dynamics_kwargs)
+    elif isinstance(dynamics, nn.Module):
+        model = dynamics
+    elif callable(dynamics):
+        model = CallableDynamics(dynamics)
+    else:
+        raise TypeError(f"dynamics must be a model name, an nn.Module or a callable, got {type(dynamics).__name__}.")
+    probe_states = th.as_tensor(np.zeros((2, *observation_space.shape), dtype=np.float32))
+    probe_actions = th.as_tensor(np.zeros((2, *action_space.shape), dtype=np.float32))
+    with th.no_grad():
+        predicted = model(probe_states, probe_actions)
+    if tuple(predicted.shape) != tuple(probe_states.shape):
+        raise ValueError(
+            f"The dynamics model {type(model).__name__} maps states of shape {tuple(probe_states.shape)} to "
+            f"{tuple(predicted.shape)}; it must return next states of the observation's shape {observation_space.shape}."
+        )
+    return model

@@ -1,0 +1,197 @@
+"""The MPPI "policy": no actor network, an online planner over a learned cost, value and a dynamics model."""
+
+from typing import Any, Dict, Sequence, Tuple, Union
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.policies import BasePolicy
+from torch import nn
+
+from sb3_mpail.mppi.costs import TerminalValue, TransitionCost, make_transition_discriminator, make_value_network
+from sb3_mpail.mppi.dynamics import DynamicsSpec, make_dynamics
+from sb3_mpail.mppi.planner import MPPIPlanner
+from sb3_mpail.mppi.sampling import GaussianSampler
+
+
+class MPPIPolicy(BasePolicy):
+    """
+    Holds the discriminator ``d_theta(s, s')``, the value ``V_phi(s)``, a dynamics model and the MPPI planner that
+    combines them. Acting means planning: the warm-start plan of each env is the recurrent ``state`` of
+    :meth:`predict`, reset on ``episode_start``, so SB3's ``evaluate_policy`` and callbacks work unchanged.
+
+    :param observation_space: a flat ``Box`` (the planner's state is the observation)
+    :param action_space: a ``Box``; planned actions are clamped to its bounds
+    :param dynamics: the planning model: a name (``"bicycle"``, ``"pendulum"``, ``"learned"``), an ``nn.Module`` or a
+        callable ``f(states, actions) -> next_states``
+    :param dynamics_kwargs: keyword arguments for a named dynamics model
+    :param n_samples: ``N``, sampled sequences per env and iteration
+    :param horizon: ``H``, planning horizon in env steps
+    :param n_iterations: ``J``, MPPI iterations per planning step
+    :param noise_std: sampling std relative to the action half-range (paper's ``Sigma = diag(0.3)``)
+    :param markup: ``eta`` on step costs (paper: 1.01, about ``1 / gamma``)
+    :param use_step_cost: plan with the discriminator's step costs (``False``: value-only ablation)
+    :param use_terminal_value: bootstrap with the value (``False``: cost-only ablation)
+    :param discriminator_hidden_sizes: hidden widths of the discriminator
+    :param value_hidden_sizes: hidden widths of the value network
+    :param use_spectral_norm: spectral normalisation on the discriminator's layers
+    :param sampler: replaces the Gaussian sampler: a module ``sampler(plan, n_samples, generator)`` returning
+        time-major action sequences clamped to the bounds
+    :param step_cost: replaces the discriminator cost in the planner: ``c(states, next_states)`` over any leading shape
+    :param terminal_value: replaces the learned value in the planner: ``V(states)`` over any leading shape
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Box,
+        action_space: spaces.Box,
+        dynamics: DynamicsSpec | None = None,
+        dynamics_kwargs: Dict[str, Any] | None = None,
+        n_samples: int = 512,
+        horizon: int = 10,
+        n_iterations: int = 5,
+        noise_std: Union[float, Sequence[float]] = 0.3,
+        markup: float = 1.01,
+        use_step_cost: bool = True,
+        use_terminal_value: bool = True,
+        discriminator_hidden_sizes: Sequence[int] = (32, 32),
+        value_hidden_sizes: Sequence[int] = (32, 32),
+        use_spectral_norm: bool = True,
+        sampler: nn.Module | None = None,
+        step_cost: nn.Module | None = None,
+        terminal_value: nn.Module | None = None,
+    ):
+        super().__init__(observation_space, action_space)
+        if not isinstance(observation_space, spaces.Box) or len(observation_space.shape) != 1:
+            raise ValueError(f"MPPI policies plan on flat Box observations; got {observation_space}.")
+        self._constructor_kwargs = dict(
+            dynamics=dynamics,
+            dynamics_kwargs=dynamics_kwargs,
+            n_samples=n_samples,
+            horizon=horizon,
+            n_iterations=n_iterations,
+            noise_std=noise_std,
+            markup=markup,
+            use_step_cost=use_step_cost,
+            use_terminal_value=use_terminal_value,
+            discriminator_hidden_sizes=discriminator_hidden_sizes,
+            value_hidden_sizes=value_hidden_sizes,
+            use_spectral_norm=use_spectral_norm,
+            sampler=sampler,
+            step_cost=step_cost,
+            terminal_value=terminal_value,
+        )
+        self.discriminator = make_transition_discriminator(
+            observation_space, action_space, discriminator_hidden_sizes, use_spectral_norm
+        )
+        self.value_net = make_value_network(observation_space.shape[0], value_hidden_sizes)
+        self.dynamics = make_dynamics(dynamics, observation_space, action_space, dynamics_kwargs)
+        low, high = action_space.low.astype(np.float32), action_space.high.astype(np.float32)
+        self.planner = MPPIPlanner(
+            dynamics=self.dynamics,
+            sampler=sampler if sampler is not None else GaussianSampler(low, high, np.asarray(noise_std, dtype=np.float32)),
+            step_cost=step_cost if step_cost is not None else TransitionCost(self.discriminator),
+            terminal_value=terminal_value if terminal_value is not None else TerminalValue(self.value_net),
+            # the paper's zero mean, kept inside the bounds for spaces that exclude 0
+            neutral_action=th.as_tensor(np.clip(np.zeros_like(low), low, high)),
+            n_samples=n_samples,
+            horizon=horizon,
+            n_iterations=n_iterations,
+            markup=markup,
+            use_step_cost=use_step_cost,
+            use_terminal_value=use_terminal_value,
+        )
+        self.register_buffer("temperature", th.tensor(1.0))
+        self.register_buffer("action_low", th.as_tensor(low))
+        self.register_buffer("action_high", th.as_tensor(high))
+        self._seed: int | None = None
+        self._generator: th.Generator | None = None
+
+    def _get_constructor_parameters(self) -> Dict[str, Any]:
+        return {**super()._get_constructor_parameters(), **self._constructor_kwargs}
+
+    def seed(self, seed: int | None) -> None:
+        """Re-seeds the planner's noise: the same seed gives the same plans and actions."""
+        self._seed = seed
+        self._generator = None
+
+    @property
+    def generator(self) -> th.Generator:
+        """The planner's noise source, on the policy's device (re-created, re-seeded, if the policy moved)."""
+        if self._generator is None or self._generator.device != self.device:
+            self._generator = th.Generator(device=self.device)
+            if self._seed is None:
+                self._generator.seed()
+            else:
+                self._generator.manual_seed(self._seed)
+        return self._generator
+
+    def initial_plan(self, n_envs: int) -> th.Tensor:
+        """The plan of an env at the start of an episode, ``(n_envs, horizon, action_dim)``."""
+        return self.planner.initial_plan(n_envs)
+
+    def act(
+        self, observations: th.Tensor, previous_plan: th.Tensor, deterministic: bool = False
+    ) -> Tuple[th.Tensor, th.Tensor]:
+        """
+        Plans from each env's state and picks the action to execute (paper Alg. 3): the plan's first action when
+        deterministic, else a sample from ``N(first action, weighted std)``, clamped to the bounds.
+
+        :param observations: ``(n_envs, state_dim)``
+        :param previous_plan: ``(n_envs, horizon, action_dim)``
+        :return: actions ``(n_envs, action_dim)`` and the new plan
+        """
+        plan, action_std = self.planner(observations.float(), previous_plan, self.temperature, self.generator)
+        actions = plan[:, 0]
+        if not deterministic:
+            noise = th.randn(actions.shape, generator=self.generator, device=actions.device, dtype=actions.dtype)
+            actions = th.clamp(actions + action_std * noise, self.action_low, self.action_high)
+        return actions, plan
+
+    def forward(self, obs: th.Tensor, deterministic: bool = False) -> th.Tensor:
+        return self._predict(obs, deterministic)
+
+    def _predict(self, observation: th.Tensor, deterministic: bool = False) -> th.Tensor:
+        """Stateless planning from a fresh plan; :meth:`predict` carries the warm start."""
+        return self.act(observation, self.initial_plan(observation.shape[0]), deterministic)[0]
+
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: np.ndarray | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+    ) -> Tuple[np.ndarray, np.ndarray]:
+        """
+        Plans an action per observation.
+
+        :param observation: one observation or a batch of them
+        :param state: the plans returned by the previous call, ``(n_envs, horizon, action_dim)``, or ``None`` at start
+        :param episode_start: per env, whether its episode just started (its plan is reset)
+        :param deterministic: execute the plan's first action instead of sampling around it
+        :return: the actions and the plans to pass back as ``state`` on the next call
+        """
+        self.set_training_mode(False)
+        observations, vectorized = self.obs_to_tensor(observation)
+        n_envs = observations.shape[0]
+        with th.no_grad():
+            fresh = self.initial_plan(n_envs)
+            if state is None:
+                plan = fresh
+            else:
+                plan = th.as_tensor(np.asarray(state), dtype=th.float32, device=self.device)
+                if plan.shape != fresh.shape:
+                    raise ValueError(
+                        f"state must be the plans returned by predict, shape {tuple(fresh.shape)}; got {tuple(plan.shape)}."
+                    )
+                if episode_start is not None:
+                    restart = th.as_tensor(np.asarray(episode_start, dtype=bool).reshape(n_envs, 1, 1), device=self.device)
+                    plan = th.where(restart, fresh, plan)
+            actions, plan = self.act(observations, plan, deterministic)
+        actions = actions.cpu().numpy()
+        if not vectorized:
+            actions = actions.squeeze(axis=0)
+        return actions, plan.cpu().numpy()
+
+
+MlpMPPI = MPPIPolicy

@@ -1,0 +1,202 @@
+"""MPAIL honours Stable-Baselines3's algorithm contract and refuses bad input with a clear error."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from imitation.data.types import Trajectory
+from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback, EvalCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+
+from sb3_mpail import MPAIL
+
+TINY_PLANNER = dict(n_samples=16, horizon=3, n_iterations=2)
+
+
+def pendulum_trajectories(n=2, length=30, seed=0):
+    env = gym.make("Pendulum-v1")
+    env.action_space.seed(seed)
+    trajectories = []
+    for index in range(n):
+        observations = [env.reset(seed=seed + index)[0]]
+        for _ in range(length):
+            observations.append(env.step(env.action_space.sample())[0])
+        trajectories.append(
+            Trajectory(obs=np.array(observations), acts=np.zeros((length, 1), np.float32), infos=None, terminal=False)
+        )
+    return trajectories
+
+
+@pytest.fixture(scope="module")
+def demos():
+    return pendulum_trajectories()
+
+
+def make_model(demos, n_envs=1, seed=0, **kwargs):
+    settings = dict(n_steps=16, seed=seed, policy_kwargs=dict(TINY_PLANNER))
+    settings.update(kwargs)
+    return MPAIL("MlpMPPI", make_vec_env("Pendulum-v1", n_envs=n_envs, seed=seed), demos, **settings)
+
+
+def test_learn_on_two_envs_counts_exactly_the_requested_steps(demos):
+    model = make_model(demos, n_envs=2).learn(64)
+    assert model.num_timesteps == 64
+
+
+def test_predict_returns_actions_of_the_right_shape_inside_the_bounds(demos):
+    model = make_model(demos)
+    single = np.array([1.0, 0.0, 0.5], np.float32)
+    action, plan = model.predict(single)
+    assert action.shape == (1,) and plan.shape == (1, 3, 1)
+    batch = np.stack([single] * 5)
+    actions, plans = model.predict(batch, deterministic=True)
+    assert actions.shape == (5, 1) and plans.shape == (5, 3, 1)
+    assert np.all(np.abs(actions) <= 2.0)
+    # the plan is the recurrent state: passing it back warm-starts, episode_start resets it
+    actions, _ = model.predict(batch, state=plans, episode_start=np.ones(5, bool), deterministic=True)
+    assert actions.shape == (5, 1)
+
+
+def test_predict_rejects_a_state_that_is_not_a_plan(demos):
+    model = make_model(demos)
+    with pytest.raises(ValueError, match="state must be the plans"):
+        model.predict(np.zeros((2, 3), np.float32), state=np.zeros((3, 3, 1)))
+
+
+def test_evaluate_policy_runs_the_planner_with_its_plans_as_state(demos):
+    model = make_model(demos)
+    env = make_vec_env("Pendulum-v1", n_envs=2, seed=1)
+    mean_return, std_return = evaluate_policy(model, env, n_eval_episodes=2)
+    assert np.isfinite(mean_return) and -2000 < mean_return <= 0
+
+
+def test_same_seed_gives_same_actions_and_same_learning(demos):
+    first, second = make_model(demos, seed=7).learn(32), make_model(demos, seed=7).learn(32)
+    for (name, a), (_, b) in zip(first.policy.state_dict().items(), second.policy.state_dict().items()):
+        assert th.equal(a, b), name
+    observation = np.array([[0.0, 1.0, 0.0]], np.float32)
+    first.set_random_seed(3)
+    second.set_random_seed(3)
+    assert np.array_equal(first.predict(observation)[0], second.predict(observation)[0])
+
+
+def test_save_and_load_give_identical_deterministic_actions_without_demos_or_env(demos, tmp_path):
+    model = make_model(demos, policy_kwargs=dict(TINY_PLANNER, dynamics="learned", dynamics_kwargs=dict(n_epochs=1)))
+    model.learn(32)
+    model.save(tmp_path / "model")
+    loaded = MPAIL.load(tmp_path / "model")
+    assert loaded.expert is None and loaded.env is None
+    for (name, a), (_, b) in zip(model.policy.state_dict().items(), loaded.policy.state_dict().items()):
+        assert th.equal(a, b), name
+    assert loaded.policy.temperature.item() == pytest.approx(model.temperature())
+    assert loaded.value_optimizer.state_dict()["state"], "value optimizer state was not restored"
+    assert loaded.policy.dynamics.optimizer.state_dict()["state"], "dynamics optimizer state was not restored"
+    observations = np.random.default_rng(0).normal(size=(4, 3)).astype(np.float32)
+    model.set_random_seed(5)
+    loaded.set_random_seed(5)
+    np.testing.assert_array_equal(
+        model.predict(observations, deterministic=True)[0], loaded.predict(observations, deterministic=True)[0]
+    )
+    with pytest.raises(ValueError, match="needs expert demos"):
+        loaded.set_env(make_vec_env("Pendulum-v1", n_envs=1))
+        loaded.learn(16)
+
+
+def test_demos_are_not_written_into_the_saved_file(demos, tmp_path):
+    import zipfile
+
+    model = make_model(demos)
+    model.save(tmp_path / "model.zip")
+    with zipfile.ZipFile(tmp_path / "model.zip") as archive:
+        assert "expert" not in archive.read("data").decode()
+
+
+def test_a_crash_while_saving_keeps_the_previous_checkpoint(demos, tmp_path, monkeypatch):
+    from stable_baselines3.common.base_class import BaseAlgorithm
+
+    model = make_model(demos)
+    model.save(tmp_path / "model.zip")
+    before = (tmp_path / "model.zip").read_bytes()
+
+    def crash(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(BaseAlgorithm, "save", crash)
+    with pytest.raises(RuntimeError, match="disk full"):
+        model.save(tmp_path / "model.zip")
+    assert (tmp_path / "model.zip").read_bytes() == before
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["model.zip"]
+
+
+def test_checkpoint_and_eval_callbacks_work(demos, tmp_path):
+    model = make_model(demos)
+    eval_env = make_vec_env("Pendulum-v1", n_envs=1, seed=3)
+    callbacks = [
+        CheckpointCallback(save_freq=16, save_path=str(tmp_path / "checkpoints")),
+        EvalCallback(eval_env, n_eval_episodes=1, eval_freq=32, log_path=str(tmp_path / "eval"), verbose=0),
+    ]
+    model.learn(32, callback=callbacks)
+    assert sorted(path.name for path in (tmp_path / "checkpoints").iterdir()) == [
+        "rl_model_16_steps.zip",
+        "rl_model_32_steps.zip",
+    ]
+    assert MPAIL.load(tmp_path / "checkpoints" / "rl_model_32_steps.zip").num_timesteps == 32
+    assert np.load(tmp_path / "eval" / "evaluations.npz")["timesteps"].tolist() == [32]
+
+
+def test_a_callback_returning_false_stops_training(demos):
+    class StopAfterFour(BaseCallback):
+        def _on_step(self) -> bool:
+            return self.n_calls < 4
+
+    model = make_model(demos).learn(1000, callback=StopAfterFour())
+    assert model.num_timesteps == 4
+
+
+def test_set_env_with_a_different_number_of_envs_fails(demos):
+    model = make_model(demos, n_envs=2)
+    with pytest.raises(AssertionError, match="number of environments"):
+        model.set_env(make_vec_env("Pendulum-v1", n_envs=3))
+
+
+def test_rewards_are_the_discriminator_logit_of_the_true_transition(demos):
+    model = make_model(demos, n_steps=210)  # crosses the 200-step time limit
+    model.train = lambda: None  # keep the discriminator as it was when the rollout was labelled
+    model.learn(210)
+    buffer = model.rollout_buffer
+    observations, next_observations = buffer.observations[:, 0], buffer.next_observations[:, 0]
+    # inside an episode s' is the next stored s; at the time limit it is the terminal observation, not the reset one
+    np.testing.assert_array_equal(next_observations[:199], observations[1:200])
+    assert not np.array_equal(next_observations[199], observations[200])
+    assert buffer.timeouts[199, 0] == 1 and buffer.timeouts[:199, 0].sum() == 0
+    with th.no_grad():
+        logits = model.policy.discriminator(
+            th.as_tensor(observations[:199]), None, th.as_tensor(next_observations[:199]), None
+        )
+    np.testing.assert_allclose(buffer.rewards[:199, 0], logits.numpy(), rtol=1e-5, atol=1e-6)
+
+
+def test_temperature_decays_per_episode_to_its_floor(demos):
+    model = make_model(demos, temperature_decay=0.5, min_temperature=0.3)
+    assert model.temperature() == 1.0
+    model.episodes_completed = 1
+    assert model.temperature() == pytest.approx(0.5)
+    model.episodes_completed = 10
+    assert model.temperature() == pytest.approx(0.3)
+
+
+def test_demos_with_another_observation_shape_are_refused():
+    wrong = [Trajectory(obs=np.zeros((5, 4), np.float32), acts=np.zeros((4, 1), np.float32), infos=None, terminal=True)]
+    with pytest.raises(ValueError, match=r"shape \(4,\) but the environment's observation space has shape \(3,\)"):
+        MPAIL("MlpMPPI", "Pendulum-v1", wrong, policy_kwargs=TINY_PLANNER)
+
+
+def test_env_without_a_known_dynamics_model_is_refused(demos):
+    with pytest.raises(ValueError, match="none was given for this environment"):
+        MPAIL("MlpMPPI", "MountainCarContinuous-v0", None)
+
+
+def test_discrete_action_space_is_refused():
+    with pytest.raises(ValueError, match="continuous actions.*Discrete"):
+        MPAIL("MlpMPPI", "CartPole-v1", None, policy_kwargs=dict(dynamics=lambda s, a: s))
