@@ -1,0 +1,43 @@
+"""Writes one benchmark's results into its own section of BENCHMARKS.md, leaving the other sections alone."""
+
+import platform
+from pathlib import Path
+
+import torch as th
+
+BENCHMARKS_FILE = Path(__file__).resolve().parent.parent / "BENCHMARKS.md"
+
+
+def machine_description() -> str:
+    """One line naming the machine a figure was measured on."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    gpu = f", GPU {th.cuda.get_device_name()}" if th.cuda.is_available() else ""
+    return f"{cpu}, {th.get_num_threads()} torch threads{gpu}; torch {th.__version__}, Python {platform.python_version()}"
+
+
+def write_section(name: str, markdown: str, path: Path = BENCHMARKS_FILE) -> None:
+    """
+    Replaces the section ``name`` (between ``<!-- name:start -->`` and ``<!-- name:end -->``) of BENCHMARKS.md,
+    appending it if absent.
+
+    :param name: section key, e.g. ``"pendulum"``
+    :param markdown: the section's body
+    """
+    start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
+    text = path.read_text() if path.exists() else "# Benchmarks\n\nEvery figure here was written by the command named beside it.\n"
+    block = f"{start}\n{markdown.strip()}\n{end}"
+    if start in text and end in text:
+        before, rest = text.split(start, 1)
+        text = before + block + rest.split(end, 1)[1]
+    else:
+        text = text.rstrip() + "\n\n" + block + "\n"
+    partial = path.with_name(path.name + ".partial")
+    partial.write_text(text)
+    partial.replace(path)
