@@ -200,3 +200,25 @@ def test_env_without_a_known_dynamics_model_is_refused(demos):
 def test_discrete_action_space_is_refused():
     with pytest.raises(ValueError, match="continuous actions.*Discrete"):
         MPAIL("MlpMPPI", "CartPole-v1", None, policy_kwargs=dict(dynamics=lambda s, a: s))
+
+
+def test_learn_with_progress_bar_and_logger_records_training_figures(demos, tmp_path):
+    from stable_baselines3.common.logger import configure
+
+    model = make_model(demos, discriminator_update_interval=1)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    model.learn(32, progress_bar=True)
+    header = (tmp_path / "progress.csv").read_text().splitlines()[0].split(",")
+    for key in ("train/discriminator_loss", "train/discriminator_accuracy", "train/value_loss", "train/temperature",
+                "rollout/learned_reward_mean", "time/total_timesteps"):
+        assert key in header, key
+
+
+def test_shipped_pendulum_demos_match_the_environment():
+    from pathlib import Path
+
+    from sb3_mpail import load_demos
+
+    demos_file = Path(__file__).resolve().parent.parent / "demos" / "pendulum_4.npz"
+    transitions = load_demos(demos_file, gym.make("Pendulum-v1").observation_space)
+    assert transitions.observations.shape == (4 * 200, 3)
