@@ -1,0 +1,36 @@
+"""rl_zoo3's own train and enjoy scripts run MPAIL from a zoo-style YAML file and write the zoo's log layout."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+CONFIG = """
+Pendulum-v1:
+  n_timesteps: 64
+  n_envs: 2
+  policy: 'MlpMPPI'
+  demos: {demos}
+  n_steps: 16
+  policy_kwargs: "dict(n_samples=16, horizon=3, n_iterations=2)"
+"""
+
+
+def zoo(*arguments: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "sb3_mpail.zoo", *arguments], capture_output=True, text=True, timeout=300)
+
+
+def test_zoo_train_then_enjoy_on_a_tiny_budget(tmp_path):
+    config = tmp_path / "mpail.yml"
+    config.write_text(CONFIG.format(demos=ROOT / "demos" / "pendulum_4.npz"))
+    logs = tmp_path / "logs"
+    trained = zoo("train", "--algo", "mpail", "--env", "Pendulum-v1", "-conf", str(config), "-f", str(logs), "--seed", "0")
+    assert trained.returncode == 0, trained.stderr[-3000:]
+    run = logs / "mpail" / "Pendulum-v1_1"
+    assert (run / "Pendulum-v1.zip").exists()
+    assert (run / "0.monitor.csv").exists() and (run / "Pendulum-v1" / "config.yml").exists()
+    enjoyed = zoo("enjoy", "--algo", "mpail", "--env", "Pendulum-v1", "-f", str(logs), "--exp-id", "1", "--no-render",
+                  "-n", "210", "--deterministic")
+    assert enjoyed.returncode == 0, enjoyed.stderr[-3000:]
+    assert "Episode Reward" in enjoyed.stdout
