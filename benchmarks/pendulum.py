@@ -62,7 +62,8 @@ class EvaluationCurve(BaseCallback):
             self.next_eval += self.eval_every
             self.evaluate()
             if self.verbose:
-                print(f"  {self.num_timesteps:>7} steps: return {self.curve[-1]['return']:8.1f}, score {self.curve[-1]['score']:.3f}")
+                point = self.curve[-1]
+                print(f"  {self.num_timesteps:>7} steps: return {point['return']:8.1f}, score {point['score']:.3f}")
         return True
 
 
@@ -119,7 +120,7 @@ def main() -> None:
     reached = [next((p["timesteps"] for p in result["curve"] if p["score"] >= 0.9), None) for result in results]
     command = f"python -m benchmarks.pendulum --seeds {' '.join(map(str, args.seeds))} --timesteps {args.timesteps}"
     rows = "\n".join(
-        f"| {r['seed']} | {r['final_return']:.1f} | {r['final_score']:.3f} | {reach if reach else 'not reached'} | {r['seconds']:.0f} |"
+        f"| {r['seed']} | {r['final_return']:.1f} | {r['final_score']:.3f} | {reach or 'not reached'} | {r['seconds']:.0f} |"
         for r, reach in zip(results, reached)
     )
     markdown = f"""## Pendulum-v1 (issue 2's first learning check)

@@ -31,7 +31,8 @@ def write_section(name: str, markdown: str, path: Path = BENCHMARKS_FILE) -> Non
     :param markdown: the section's body
     """
     start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
-    text = path.read_text() if path.exists() else "# Benchmarks\n\nEvery figure here was written by the command named beside it.\n"
+    header = "# Benchmarks\n\nEvery figure here was written by the command named beside it.\n"
+    text = path.read_text() if path.exists() else header
     block = f"{start}\n{markdown.strip()}\n{end}"
     if start in text and end in text:
         before, rest = text.split(start, 1)
