@@ -39,6 +39,8 @@ class MPPIPolicy(BasePolicy):
         time-major action sequences clamped to the bounds
     :param step_cost: replaces the discriminator cost in the planner: ``c(states, next_states)`` over any leading shape
     :param terminal_value: replaces the learned value in the planner: ``V(states)`` over any leading shape
+    :param compile_planner: compile the planner's roll-out/cost/weight update with ``torch.compile``: ``False``
+        (default), ``True`` or a ``torch.compile`` mode (``"reduce-overhead"`` uses CUDA graphs on a GPU); same plans
     """
 
     def __init__(
@@ -60,6 +62,7 @@ class MPPIPolicy(BasePolicy):
         sampler: nn.Module | None = None,
         step_cost: nn.Module | None = None,
         terminal_value: nn.Module | None = None,
+        compile_planner: Union[bool, str] = False,
     ):
         super().__init__(observation_space, action_space)
         if not isinstance(observation_space, spaces.Box) or len(observation_space.shape) != 1:
@@ -80,6 +83,7 @@ class MPPIPolicy(BasePolicy):
             sampler=sampler,
             step_cost=step_cost,
             terminal_value=terminal_value,
+            compile_planner=compile_planner,
         )
         self.discriminator = make_transition_discriminator(
             observation_space, action_space, discriminator_hidden_sizes, use_spectral_norm
@@ -100,6 +104,7 @@ class MPPIPolicy(BasePolicy):
             markup=markup,
             use_step_cost=use_step_cost,
             use_terminal_value=use_terminal_value,
+            compile_planner=compile_planner,
         )
         self.register_buffer("temperature", th.tensor(1.0))
         self.register_buffer("action_low", th.as_tensor(low))

@@ -5,7 +5,7 @@ In MPAIL the step cost is the negated discriminator logit, ``c(s, s') = -d_theta
 is the learned ``V_phi``, so both are thin views of networks the algorithm trains.
 """
 
-from typing import Sequence
+from typing import Optional, Sequence
 
 import torch as th
 from gymnasium import spaces
@@ -13,6 +13,8 @@ from imitation.rewards.reward_nets import BasicRewardNet
 from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
 from torch.nn.utils.parametrizations import spectral_norm
+
+from sb3_mpail.mppi.fused import FusedTransitionCost, FusedValue, freeze_mlp, fused_mlp_ok
 
 
 def make_transition_discriminator(
@@ -70,6 +72,24 @@ class TransitionCost(nn.Module):
         )
         return -logits.view(batch_shape)
 
+    def planning_view(self, state_dim: int) -> Optional[FusedTransitionCost]:
+        """
+        The fused whole-horizon cost with the discriminator's weights frozen for one planning step, or ``None``
+        where the module path must be used: gradients enabled, training mode (spectral norm's power iteration
+        then updates its vectors on every call) or a discriminator other than an MLP on ``(s, s')``.
+
+        :param state_dim: size of a state
+        """
+        net = self.discriminator
+        if th.is_grad_enabled() or net.training or not isinstance(net, BasicRewardNet):
+            return None
+        if not (net.use_state and net.use_next_state) or net.use_action or net.use_done:
+            return None
+        mlp = freeze_mlp(net.mlp)
+        if not fused_mlp_ok(mlp, 2 * state_dim):
+            return None
+        return FusedTransitionCost(mlp, state_dim)
+
 
 class TerminalValue(nn.Module):
     """
@@ -84,3 +104,15 @@ class TerminalValue(nn.Module):
 
     def forward(self, states: th.Tensor) -> th.Tensor:
         return self.value_network(states.reshape(-1, states.shape[-1])).view(states.shape[:-1])
+
+    def planning_view(self, state_dim: int) -> Optional[FusedValue]:
+        """
+        The value with its weights frozen for one planning step, or ``None`` where the module path must be used
+        (gradients enabled, training mode or a network other than a plain MLP).
+
+        :param state_dim: size of a state
+        """
+        if th.is_grad_enabled() or self.value_network.training:
+            return None
+        mlp = freeze_mlp(self.value_network)
+        return FusedValue(mlp) if fused_mlp_ok(mlp, state_dim) else None

@@ -6,7 +6,7 @@ Every model takes 2-D batches: ``states`` of shape ``(batch, state_dim)`` and ``
 """
 
 import math
-from typing import Any, Callable, Dict, Sequence, Union
+from typing import Any, Callable, Dict, Sequence, Tuple, Union
 
 import numpy as np
 import torch as th
@@ -15,6 +15,23 @@ from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
 
 DynamicsFunction = Callable[[th.Tensor, th.Tensor], th.Tensor]
+
+
+def feature_major_states(initial_states: th.Tensor, actions: th.Tensor) -> Tuple[th.Tensor, th.Tensor]:
+    """
+    Storage for a batched roll-out: ``states`` of shape ``(horizon + 1, n_envs, n_samples, state_dim)`` backed by
+    ``columns`` of shape ``(state_dim, horizon + 1, n_envs, n_samples)``, so each state dimension is one contiguous
+    block a model writes with plain vector ops, and matrix products read ``states`` as a transposed matrix without a
+    copy. ``states[0]`` is filled with the initial states.
+
+    :param initial_states: ``(n_envs, state_dim)``
+    :param actions: time-major sequences, ``(horizon, n_envs, n_samples, action_dim)``
+    :return: ``states`` and ``columns``, two views of the same memory
+    """
+    horizon, n_envs, n_samples, _ = actions.shape
+    columns = actions.new_empty(initial_states.shape[-1], horizon + 1, n_envs, n_samples)
+    columns[:, 0] = initial_states.t().unsqueeze(-1)
+    return columns.permute(1, 2, 3, 0), columns
 
 
 class KinematicBicycle(nn.Module):
@@ -51,6 +68,36 @@ class KinematicBicycle(nn.Module):
         next_states[:, 11] = yaw_rate
         return next_states
 
+    def rollout(self, initial_states: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        """
+        All ``H`` steps at once in closed form, with cumulative sums over time (as the authors' planner does):
+        the states of ``H`` calls of :meth:`forward` up to float rounding.
+
+        :param initial_states: current state per env, ``(n_envs, 12)``
+        :param actions: time-major sequences, ``(horizon, n_envs, n_samples, 2)``
+        :return: states ``s_0 .. s_H``, ``(horizon + 1, n_envs, n_samples, 12)``, stored feature-major (see
+            :func:`feature_major_states`)
+        """
+        horizon = actions.shape[0]
+        states, columns = feature_major_states(initial_states, actions)
+        held = initial_states.t()[:, :, None].unsqueeze(1)  # (12, 1, n_envs, 1)
+        columns[2:5, 1:] = held[2:5]
+        columns[8:11, 1:] = held[8:11]
+        speed = th.mul(actions[..., 0], self.max_speed, out=columns[6, 1:])
+        yaw_rate = th.mul(th.tan(actions[..., 1] * self.max_steer), speed, out=columns[11, 1:]).div_(self.wheelbase)
+        columns[7, 1:] = 0.0
+        # yaw_t = wrap(yaw_0 + sum_{i < t} yaw_rate_i dt), summed in the order of the step-by-step model
+        yaw = columns[5]
+        th.mul(yaw_rate, self.dt, out=yaw[1:])
+        yaw.cumsum_(dim=0)
+        yaw[1:].add_(math.pi).remainder_(2 * math.pi).sub_(math.pi)
+        # x_t = x_0 + sum_{i < t} speed_i cos(yaw_i) dt, likewise y
+        heading = yaw[:horizon]
+        th.mul(th.cos(heading), speed, out=columns[0, 1:]).mul_(self.dt)
+        th.mul(th.sin(heading), speed, out=columns[1, 1:]).mul_(self.dt)
+        columns[:2].cumsum_(dim=1)
+        return states
+
 
 class PendulumDynamics(nn.Module):
     """
@@ -76,6 +123,31 @@ class PendulumDynamics(nn.Module):
         angular_velocity = th.clamp(states[:, 2] + acceleration * self.dt, -self.max_speed, self.max_speed)
         angle = angle + angular_velocity * self.dt
         return th.stack((th.cos(angle), th.sin(angle), angular_velocity), dim=1)
+
+    def rollout(self, initial_states: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        """
+        All ``H`` steps, carrying the angle instead of re-deriving it with ``atan2`` each step and with the torque
+        term computed for every step at once: the states of ``H`` calls of :meth:`forward` up to float rounding.
+
+        :param initial_states: current state per env, ``(n_envs, 3)``
+        :param actions: time-major sequences, ``(horizon, n_envs, n_samples, 1)``
+        :return: states ``s_0 .. s_H``, ``(horizon + 1, n_envs, n_samples, 3)``
+        """
+        horizon = actions.shape[0]
+        states, columns = feature_major_states(initial_states, actions)
+        torque_term = th.clamp(actions[..., 0], -self.max_torque, self.max_torque).mul_(3.0 / (self.mass * self.length**2))
+        gravity_factor = 3 * self.gravity / (2 * self.length)
+        angles = th.empty_like(columns[0])
+        velocities = columns[2]
+        angles[0] = th.atan2(initial_states[:, 1], initial_states[:, 0]).unsqueeze(1)
+        for step in range(horizon):
+            acceleration = th.sin(angles[step]).mul_(gravity_factor).add_(torque_term[step])
+            velocity = th.add(velocities[step], acceleration, alpha=self.dt, out=velocities[step + 1])
+            velocity.clamp_(-self.max_speed, self.max_speed)
+            th.add(angles[step], velocity, alpha=self.dt, out=angles[step + 1])
+        th.cos(angles[1:], out=columns[0, 1:])
+        th.sin(angles[1:], out=columns[1, 1:])
+        return states
 
 
 class CallableDynamics(nn.Module):

@@ -11,17 +11,44 @@ One planning step, for every env at once:
    d. **weight** the samples by ``softmax(-C / temperature)`` and set the plan to the weighted mean;
 3. the **policy std** of the first action is the weighted spread of the last iteration's samples around it.
 
-Tensors inside a planning step are time-major, ``(horizon, n_envs, n_samples, dim)``, so each horizon step is
-one contiguous block: the dynamics model sees ``n_envs * n_samples`` states per call and the step cost sees
-the whole horizon in a single call.
+Tensors inside a planning step are time-major, ``(horizon, n_envs, n_samples, dim)``. The same step written plainly
+is :func:`sb3_mpail.mppi.reference.reference_plan`; this planner gives the same plan faster:
+
+* dynamics models with a batched ``rollout(initial_states, actions)`` roll out all ``H`` steps in one call;
+* the discriminator and value run through their fused planning views (:mod:`sb3_mpail.mppi.fused`), their weights
+  frozen once per planning step, when gradients are off and the networks are in eval mode;
+* optionally the roll-out/cost/weight update is compiled with ``torch.compile`` (``compile_planner``).
 """
 
-from typing import NamedTuple
+from typing import Callable, NamedTuple, Optional, Tuple, Union
 
 import torch as th
 from torch import nn
 
 from sb3_mpail.mppi.dynamics import DynamicsFunction
+from sb3_mpail.mppi.fused import Workspace
+from sb3_mpail.mppi.reference import (
+    mppi_weights,
+    reference_plan,
+    shift_plan,
+    trajectory_costs,
+    weighted_action_std,
+    weighted_plan,
+)
+from sb3_mpail.mppi.reference import rollout as rollout_step_by_step
+
+__all__ = [
+    "MPPIPlanner",
+    "PlanResult",
+    "TrajectoryCost",
+    "mppi_weights",
+    "rollout",
+    "shift_plan",
+    "trajectory_costs",
+    "weighted_action_std",
+    "weighted_mean",
+    "weighted_plan",
+]
 
 
 class PlanResult(NamedTuple):
@@ -31,76 +58,94 @@ class PlanResult(NamedTuple):
     action_std: th.Tensor  #: weighted std of the first action per env, ``(n_envs, action_dim)``
 
 
-def shift_plan(plan: th.Tensor, neutral_action: th.Tensor) -> th.Tensor:
-    """Warm start: drop the executed first step and append the neutral action (paper: mean 0)."""
-    return th.cat((plan[:, 1:], neutral_action.expand(plan.shape[0], 1, -1)), dim=1)
-
-
 def rollout(dynamics: DynamicsFunction, initial_states: th.Tensor, actions: th.Tensor) -> th.Tensor:
     """
-    Predicts the states visited by every sampled sequence.
+    Predicts the states visited by every sampled sequence: through the model's own batched
+    ``rollout(initial_states, actions)`` when it has one and gradients are off (batched roll-outs write into
+    preallocated storage), else one dynamics call per step.
 
     :param dynamics: ``f(states, actions) -> next_states`` on 2-D batches
     :param initial_states: current state per env, ``(n_envs, state_dim)``
     :param actions: sampled sequences, ``(horizon, n_envs, n_samples, action_dim)``
     :return: states ``s_0 .. s_H``, ``(horizon + 1, n_envs, n_samples, state_dim)``
     """
-    horizon, n_envs, n_samples, _ = actions.shape
-    states = actions.new_empty(horizon + 1, n_envs, n_samples, initial_states.shape[-1])
-    states[0] = initial_states.unsqueeze(1)
-    for step in range(horizon):
-        states[step + 1] = dynamics(
-            states[step].view(n_envs * n_samples, -1), actions[step].view(n_envs * n_samples, -1)
-        ).view(n_envs, n_samples, -1)
-    return states
+    batched_rollout = getattr(dynamics, "rollout", None)
+    if batched_rollout is not None and not th.is_grad_enabled():
+        return batched_rollout(initial_states, actions)
+    return rollout_step_by_step(dynamics, initial_states, actions)
 
 
-def trajectory_costs(
-    states: th.Tensor,
-    step_cost: nn.Module | None,
-    terminal_value: nn.Module | None,
-    markup: float,
-) -> th.Tensor:
+def weighted_mean(weights: th.Tensor, actions: th.Tensor) -> th.Tensor:
+    """:func:`~sb3_mpail.mppi.reference.weighted_plan` as one batched matrix-vector product (no permuted copies)."""
+    return th.matmul(actions.transpose(2, 3), weights.unsqueeze(-1)).squeeze(-1).transpose(0, 1)
+
+
+class TrajectoryCost:
     """
-    ``C_k = sum_t eta^t c(s_t, s_{t+1}) - eta^H V(s_H)``; either term may be switched off (``None``).
+    ``C_k = sum_t eta^t c(s_t, s_{t+1}) - eta^H V(s_H)`` for one planning step. Step cost and value run through
+    their fused planning views (weights frozen now, at construction) where they offer one, else as plain calls.
 
-    :param states: rolled-out states, ``(horizon + 1, n_envs, n_samples, state_dim)``
-    :param step_cost: ``c(s, s')`` over any leading shape, or ``None`` for the value-only planner
-    :param terminal_value: ``V(s)`` over any leading shape, or ``None`` for the cost-only planner
-    :param markup: ``eta``, the per-step factor on step costs (``1 / gamma`` in MPAIL)
-    :return: total cost per sample, ``(n_envs, n_samples)``
+    :param step_cost: ``c(s, s')`` over any leading shape, or ``None`` (value-only)
+    :param terminal_value: ``V(s)`` over any leading shape, or ``None`` (cost-only)
+    :param markup: ``eta``
+    :param horizon: ``H``
+    :param states: the current states, ``(n_envs, state_dim)`` (their size, device and dtype are used)
+    :param workspace: scratch tensors of the fused views
+    :param fused: use the fused views where available
     """
-    horizon = states.shape[0] - 1
-    costs = states.new_zeros(states.shape[1:3])
-    if step_cost is not None:
-        markups = markup ** th.arange(horizon, device=states.device, dtype=states.dtype)
-        costs = costs + th.einsum("t,ten->en", markups, step_cost(states[:-1], states[1:]))
-    if terminal_value is not None:
-        costs = costs - markup**horizon * terminal_value(states[-1])
-    return costs
+
+    def __init__(
+        self,
+        step_cost: Optional[Callable[[th.Tensor, th.Tensor], th.Tensor]],
+        terminal_value: Optional[Callable[[th.Tensor], th.Tensor]],
+        markup: float,
+        horizon: int,
+        states: th.Tensor,
+        workspace: Workspace,
+        fused: bool = True,
+    ):
+        self.step_cost = step_cost
+        self.terminal_value = terminal_value
+        self.markups = markup ** th.arange(horizon, device=states.device, dtype=states.dtype)
+        self.terminal_markup = markup**horizon
+        self.workspace = workspace
+        state_dim = states.shape[-1]
+        self.fused_step_cost = _planning_view(step_cost, state_dim) if fused else None
+        self.fused_value = _planning_view(terminal_value, state_dim) if fused else None
+
+    def __call__(self, states: th.Tensor) -> th.Tensor:
+        """
+        :param states: rolled-out states, ``(horizon + 1, n_envs, n_samples, state_dim)``
+        :return: total cost per sample, ``(n_envs, n_samples)``
+        """
+        costs = None
+        if self.step_cost is not None:
+            if self.fused_step_cost is not None:
+                costs = self.fused_step_cost(states, self.markups, self.workspace)
+            else:
+                costs = th.einsum("t,ten->en", self.markups, self.step_cost(states[:-1], states[1:]))
+        if self.terminal_value is not None:
+            final_states = states[-1]
+            if self.fused_value is not None:
+                values = self.fused_value(final_states, self.workspace)
+            else:
+                values = self.terminal_value(final_states)
+            costs = values * -self.terminal_markup if costs is None else costs.sub_(values, alpha=self.terminal_markup)
+        assert costs is not None
+        return costs
 
 
-def mppi_weights(costs: th.Tensor, temperature: th.Tensor) -> th.Tensor:
-    """Exponential weights ``softmax(-C / lambda)`` over samples (subtracting ``min C`` for stability is built in)."""
-    return th.softmax(-costs / temperature, dim=-1)
-
-
-def weighted_plan(weights: th.Tensor, actions: th.Tensor) -> th.Tensor:
-    """Weighted mean of the sampled sequences, ``(n_envs, horizon, action_dim)``."""
-    return th.einsum("en,tena->eta", weights, actions)
-
-
-def weighted_action_std(weights: th.Tensor, actions: th.Tensor, plan: th.Tensor) -> th.Tensor:
-    """``sqrt(sum_k w_k (plan_0 - a_k,0)^2)`` per env and action dimension, ``(n_envs, action_dim)``."""
-    deviations = actions[0] - plan[:, :1]
-    return th.sqrt(th.einsum("en,ena->ea", weights, deviations.square()))
+def _planning_view(network: Optional[Callable], state_dim: int) -> Optional[Callable]:
+    view = getattr(network, "planning_view", None)
+    return view(state_dim) if view is not None else None
 
 
 class MPPIPlanner(nn.Module):
     """
     Infinite-horizon MPPI with swappable sampler, dynamics, step cost and terminal value.
 
-    :param dynamics: ``f(states, actions) -> next_states`` on 2-D batches
+    :param dynamics: ``f(states, actions) -> next_states`` on 2-D batches, optionally with a batched
+        ``rollout(initial_states, actions)`` over time-major sequences
     :param sampler: ``sampler(plan, n_samples, generator)`` returning time-major clamped action sequences
     :param step_cost: ``c(s, s')`` over any leading shape
     :param terminal_value: ``V(s)`` over any leading shape
@@ -111,6 +156,8 @@ class MPPIPlanner(nn.Module):
     :param markup: ``eta`` on step costs
     :param use_step_cost: include the step costs (switch off for the value-only ablation)
     :param use_terminal_value: include the terminal value (switch off for the cost-only ablation)
+    :param compile_planner: compile the roll-out/cost/weight update with ``torch.compile``: ``False`` (default),
+        ``True`` (default mode) or a ``torch.compile`` mode such as ``"reduce-overhead"`` (CUDA graphs on a GPU)
     """
 
     def __init__(
@@ -126,6 +173,7 @@ class MPPIPlanner(nn.Module):
         markup: float = 1.01,
         use_step_cost: bool = True,
         use_terminal_value: bool = True,
+        compile_planner: Union[bool, str] = False,
     ):
         super().__init__()
         if not (use_step_cost or use_terminal_value):
@@ -141,10 +189,25 @@ class MPPIPlanner(nn.Module):
         self.markup = markup
         self.use_step_cost = use_step_cost
         self.use_terminal_value = use_terminal_value
+        self.compile_planner = compile_planner
+        self._workspace = Workspace()
+        self._compiled_update: Optional[Callable] = None
 
     def initial_plan(self, n_envs: int) -> th.Tensor:
         """A fresh plan: the neutral action at every step, ``(n_envs, horizon, action_dim)``."""
         return self.neutral_action.expand(n_envs, self.horizon, -1).clone()
+
+    def trajectory_cost(self, states: th.Tensor, horizon: int) -> TrajectoryCost:
+        """The trajectory cost of this planning step, networks frozen now (fused views only when not compiling)."""
+        return TrajectoryCost(
+            self.step_cost if self.use_step_cost else None,
+            self.terminal_value if self.use_terminal_value else None,
+            self.markup,
+            horizon,
+            states,
+            self._workspace,
+            fused=not self.compile_planner,
+        )
 
     def forward(
         self, states: th.Tensor, previous_plan: th.Tensor, temperature: th.Tensor, generator: th.Generator
@@ -158,12 +221,51 @@ class MPPIPlanner(nn.Module):
         :param generator: source of the sampling noise
         """
         plan = shift_plan(previous_plan, self.neutral_action)
-        step_cost = self.step_cost if self.use_step_cost else None
-        terminal_value = self.terminal_value if self.use_terminal_value else None
+        trajectory_cost = self.trajectory_cost(states, plan.shape[1])
+        update = self._update
+        if self.compile_planner:
+            update = self._compiled()
         for _ in range(self.n_iterations):
             actions = self.sampler(plan, self.n_samples, generator)
-            states_visited = rollout(self.dynamics, states, actions)
-            costs = trajectory_costs(states_visited, step_cost, terminal_value, self.markup)
-            weights = mppi_weights(costs, temperature)
-            plan = weighted_plan(weights, actions)
+            plan, weights = update(states, actions, temperature, trajectory_cost)
         return PlanResult(plan, weighted_action_std(weights, actions, plan))
+
+    def _update(
+        self, states: th.Tensor, actions: th.Tensor, temperature: th.Tensor, trajectory_cost: TrajectoryCost
+    ) -> Tuple[th.Tensor, th.Tensor]:
+        """One MPPI iteration after sampling: roll out, cost, weight, new plan (and the weights)."""
+        states_visited = rollout(self.dynamics, states, actions)
+        costs = trajectory_cost(states_visited)
+        weights = mppi_weights(costs, temperature)
+        return weighted_mean(weights, actions), weights
+
+    def _compiled(self) -> Callable:
+        if self._compiled_update is None:
+            mode = None if self.compile_planner is True else self.compile_planner
+            self._compiled_update = th.compile(self._update, mode=mode, dynamic=False)
+        return self._compiled_update
+
+    def reference_forward(
+        self, states: th.Tensor, previous_plan: th.Tensor, temperature: th.Tensor, generator: th.Generator
+    ) -> PlanResult:
+        """The same planning step through the plain implementation, :func:`~sb3_mpail.mppi.reference.reference_plan`."""
+        plan, action_std = reference_plan(
+            self.dynamics,
+            self.sampler,
+            self.step_cost if self.use_step_cost else None,
+            self.terminal_value if self.use_terminal_value else None,
+            self.neutral_action,
+            states,
+            previous_plan,
+            temperature,
+            generator,
+            self.n_samples,
+            self.n_iterations,
+            self.markup,
+        )
+        return PlanResult(plan, action_std)
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_compiled_update"] = None  # compiled code is rebuilt on demand, never pickled
+        return state

@@ -1,0 +1,240 @@
+"""
+Planning-time fast paths for the learned networks (used under ``no_grad`` in eval mode only).
+
+The planner evaluates the discriminator on ``H * n_envs * N`` transitions ``J`` times per planning step. The plain
+module call concatenates ``(s, s')``, recomputes the spectral-norm weights on every call and allocates every
+intermediate afresh. Here instead:
+
+* the (normalised) weights are read once per planning step into a :class:`FrozenMlp`;
+* the discriminator's first layer is split into its ``s`` and ``s'`` halves, so every visited state is projected
+  once (one matmul over ``H + 1`` states) and ``W [s_t, s_{t+1}] = W_s s_t + W_s' s_{t+1}`` is a shifted sum;
+* activations run in place in scratch tensors of a :class:`Workspace` reused across chunks, iterations and calls;
+* the rows are processed in chunks that stay in the CPU cache;
+* the markups ``eta^t`` and the output layer fold into one matrix-vector product per chunk.
+
+Results equal the module path up to float rounding; ``tests/test_planner_equivalence.py`` checks it.
+"""
+
+from dataclasses import dataclass
+from functools import partial
+from typing import Callable, Dict, List, Optional
+
+import torch as th
+import torch.nn.functional as F
+from torch import nn
+
+#: rows per chunk of the hidden activations: 8192 x 32 floats (1 MiB) stay in the cache between layers
+CHUNK_ROWS = 8192
+
+InPlaceActivation = Callable[[th.Tensor], th.Tensor]
+
+
+class Workspace:
+    """
+    Named scratch tensors, reused instead of allocated afresh (large fresh tensors cost page faults).
+
+    A tensor taken from the workspace is only valid until the next request of the same name.
+    """
+
+    def __init__(self) -> None:
+        self._storage: Dict[str, th.Tensor] = {}
+
+    def get(self, name: str, shape: tuple, like: th.Tensor) -> th.Tensor:
+        """
+        :param name: key of the scratch tensor
+        :param shape: shape wanted
+        :param like: gives the device and dtype
+        :return: an uninitialised contiguous tensor of ``shape``
+        """
+        numel = 1
+        for size in shape:
+            numel *= size
+        storage = self._storage.get(name)
+        if storage is None or storage.numel() < numel or storage.device != like.device or storage.dtype != like.dtype:
+            storage = self._storage[name] = th.empty(numel, device=like.device, dtype=like.dtype)
+        return storage[:numel].view(shape)
+
+    def clear(self) -> None:
+        self._storage.clear()
+
+    def __getstate__(self) -> dict:  # scratch memory is not worth saving or copying
+        return {"_storage": {}}
+
+
+def _in_place_activation(module: nn.Module) -> Optional[InPlaceActivation]:
+    if isinstance(module, nn.ReLU):
+        return th.relu_
+    if isinstance(module, nn.LeakyReLU):
+        return partial(F.leaky_relu_, negative_slope=module.negative_slope)
+    if isinstance(module, nn.Tanh):
+        return th.tanh_
+    return None
+
+
+@dataclass
+class FrozenMlp:
+    """
+    A snapshot of an MLP's weights for fast inference.
+
+    :param weights: per layer, the weight transposed to ``(in, out)``
+    :param biases: per layer, the bias ``(out,)``
+    :param activations: per layer, the in-place activation applied after it, or ``None``
+    """
+
+    weights: List[th.Tensor]
+    biases: List[th.Tensor]
+    activations: List[Optional[InPlaceActivation]]
+
+
+def freeze_mlp(network: nn.Module) -> Optional[FrozenMlp]:
+    """
+    Reads the weights of a ``Linear``/activation ``nn.Sequential`` once (parametrisations such as spectral norm
+    applied, as in eval mode), or returns ``None`` if the network has layers this fast path does not know.
+
+    :param network: the MLP, in eval mode
+    """
+    if not isinstance(network, nn.Sequential) or network.training:
+        return None
+    weights: List[th.Tensor] = []
+    biases: List[th.Tensor] = []
+    activations: List[Optional[InPlaceActivation]] = []
+    for module in network:
+        if isinstance(module, nn.Linear):
+            weight = module.weight.detach()
+            weights.append(weight.t())  # a transposed view: matmuls read it in place
+            biases.append(module.bias.detach() if module.bias is not None else weight.new_zeros(weight.shape[0]))
+            activations.append(None)
+        elif _in_place_activation(module) is not None:
+            if not activations or activations[-1] is not None:
+                return None
+            activations[-1] = _in_place_activation(module)
+        elif isinstance(module, (nn.Dropout, nn.Identity, nn.Flatten)) or type(module).__name__ == "SqueezeLayer":
+            continue  # identities in eval mode on 2-D batches
+        else:
+            return None
+    if not weights:
+        return None
+    return FrozenMlp(weights, biases, activations)
+
+
+def _hidden_layers(
+    mlp: FrozenMlp, hidden: th.Tensor, first_layer: int, last_layer: int, workspace: Workspace
+) -> th.Tensor:
+    """Layers ``first_layer .. last_layer - 1`` of ``mlp`` on 2-D ``hidden``, ping-ponging two scratch tensors."""
+    for index in range(first_layer, last_layer):
+        output = workspace.get(f"hidden{index % 2}", (hidden.shape[0], mlp.weights[index].shape[1]), hidden)
+        th.addmm(mlp.biases[index], hidden, mlp.weights[index], out=output)
+        if mlp.activations[index] is not None:
+            mlp.activations[index](output)
+        hidden = output
+    return hidden
+
+
+class FusedTransitionCost:
+    """
+    ``sum_t markups[t] * c(s_t, s_{t+1})`` with ``c = -d_theta`` for a whole rolled-out horizon, for a frozen
+    discriminator MLP on the concatenation ``[s, s']``.
+
+    :param mlp: the frozen discriminator; its first layer takes ``2 * state_dim`` inputs, its last gives one output
+        with no activation after it
+    :param state_dim: size of a state
+    """
+
+    def __init__(self, mlp: FrozenMlp, state_dim: int):
+        first_weight = mlp.weights[0]  # (2 * state_dim, hidden)
+        self.mlp = mlp
+        # W [s, s'] = W_s s + W_s' s': two matmuls accumulating into one output, no concatenated input
+        self.state_weight = first_weight[:state_dim]
+        self.next_state_weight = first_weight[state_dim:]
+        self.output_weight = mlp.weights[-1][:, 0]
+        self._markups: Optional[th.Tensor] = None
+        self._negative_markups = self._constant = first_weight.new_zeros(())
+
+    def __call__(self, states: th.Tensor, markups: th.Tensor, workspace: Workspace) -> th.Tensor:
+        """
+        :param states: ``s_0 .. s_H``, ``(horizon + 1, n_envs, n_samples, state_dim)``, rows contiguous or
+            stored feature-major
+        :param markups: ``eta^t`` per step, ``(horizon,)``
+        :param workspace: scratch tensors
+        :return: cost per sample, ``(n_envs, n_samples)``, a workspace tensor
+        """
+        n_states, n_envs, n_samples, state_dim = states.shape
+        horizon = n_states - 1
+        columns = n_envs * n_samples
+        flat_states = states.reshape(n_states, columns, state_dim)
+        costs = workspace.get("step_costs", (n_envs, n_samples), states).view(columns)
+        if markups is not self._markups:  # the same markups come back every iteration of a planning step
+            # -sum_t m_t (z_t + b) = z^T (-m) - b sum_t m_t, with z the output layer's product before its bias
+            self._markups = markups
+            self._negative_markups = -markups
+            self._constant = self.mlp.biases[-1] * self._negative_markups.sum()
+        negative_markups, constant = self._negative_markups, self._constant
+        chunk = max(1, CHUNK_ROWS // horizon)
+        for start in range(0, columns, chunk):
+            stop = min(start + chunk, columns)
+            self._chunk_costs(flat_states[:, start:stop], negative_markups, constant, costs[start:stop], workspace)
+        return costs.view(n_envs, n_samples)
+
+    def _chunk_costs(
+        self,
+        states: th.Tensor,
+        negative_markups: th.Tensor,
+        constant: th.Tensor,
+        out: th.Tensor,
+        workspace: Workspace,
+    ) -> None:
+        n_states, columns, state_dim = states.shape
+        horizon, mlp = n_states - 1, self.mlp
+        if states.stride(0) != columns * states.stride(1):  # time and sample dimensions must merge into rows
+            states = workspace.get("state_chunk", states.shape, states).copy_(states)
+        rows = horizon * columns
+        hidden = workspace.get("first_layer", (rows, self.state_weight.shape[1]), states)
+        th.addmm(mlp.biases[0], states[:-1].reshape(rows, state_dim), self.state_weight, out=hidden)
+        hidden.addmm_(states[1:].reshape(rows, state_dim), self.next_state_weight)
+        n_layers = len(mlp.weights)
+        if n_layers == 1:  # a linear discriminator: the first layer is the output, its bias already added
+            th.mv(hidden.view(horizon, columns).t(), negative_markups, out=out)
+            return
+        if mlp.activations[0] is not None:
+            mlp.activations[0](hidden)
+        hidden = _hidden_layers(mlp, hidden, 1, n_layers - 1, workspace)
+        logits = workspace.get("logits", (rows,), states)
+        th.mv(hidden, self.output_weight, out=logits)
+        th.addmv(constant, logits.view(horizon, columns).t(), negative_markups, out=out)
+
+
+class FusedValue:
+    """
+    A frozen value MLP ``V(s)`` on any leading shape, evaluated in cache-sized chunks with in-place activations.
+
+    :param mlp: the frozen value network, one output with no activation after it
+    """
+
+    def __init__(self, mlp: FrozenMlp):
+        self.mlp = mlp
+
+    def __call__(self, states: th.Tensor, workspace: Workspace) -> th.Tensor:
+        """
+        :param states: ``(..., state_dim)``
+        :param workspace: scratch tensors
+        :return: ``V(s)`` of shape ``states.shape[:-1]``, a workspace tensor
+        """
+        flat_states = states.reshape(-1, states.shape[-1])
+        rows = flat_states.shape[0]
+        values = workspace.get("values", (rows,), states)
+        mlp = self.mlp
+        for start in range(0, rows, CHUNK_ROWS):
+            stop = min(start + CHUNK_ROWS, rows)
+            hidden = _hidden_layers(mlp, flat_states[start:stop], 0, len(mlp.weights) - 1, workspace)
+            th.addmv(mlp.biases[-1], hidden, mlp.weights[-1][:, 0], out=values[start:stop])
+        return values.view(states.shape[:-1])
+
+
+def fused_mlp_ok(mlp: Optional[FrozenMlp], in_size: int) -> bool:
+    """Whether a frozen MLP fits the fused paths: ``in_size`` inputs, one output, no activation after the output."""
+    return (
+        mlp is not None
+        and mlp.weights[0].shape[0] == in_size
+        and mlp.weights[-1].shape[1] == 1
+        and mlp.activations[-1] is None
+    )

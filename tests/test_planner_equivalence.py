@@ -1,0 +1,163 @@
+"""The optimised planner computes the same plans as the plain reference implementation (paper Alg. 2 as written)."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+
+import sb3_mpail.mppi.fused as fused
+from sb3_mpail.envs.navigation import NavigationEnv
+from sb3_mpail.mppi import KinematicBicycle, PendulumDynamics
+from sb3_mpail.mppi.planner import rollout
+from sb3_mpail.mppi.reference import rollout as rollout_step_by_step
+from sb3_mpail.policies import MPPIPolicy
+
+NAVIGATION = NavigationEnv()
+PENDULUM = gym.make("Pendulum-v1")
+
+
+def make_policy(env: gym.Env, dynamics: str, seed: int = 0, dtype: th.dtype = th.float64, **kwargs) -> MPPIPolicy:
+    """
+    A policy with its real discriminator and value. Equivalence is checked in float64 by default: the weights
+    ``exp(-C / temperature)`` amplify the float32 rounding of the costs by ``1 / temperature``, which would blur the
+    check; float32 is checked separately at the paper's settings.
+    """
+    th.manual_seed(seed)
+    policy = MPPIPolicy(env.observation_space, env.action_space, dynamics=dynamics, **kwargs).to(dtype)
+    # a few training-mode calls move spectral norm's power-iteration vectors away from their initial values
+    with th.no_grad():
+        states = th.randn(64, 2 * env.observation_space.shape[0], dtype=dtype)
+        for _ in range(3):
+            policy.discriminator(states[:, : states.shape[1] // 2], None, states[:, states.shape[1] // 2 :], None)
+    policy.set_training_mode(False)
+    policy.temperature.fill_(0.05)  # peaked weights make the plan sensitive to every cost
+    return policy
+
+
+def navigation_states(n_envs: int, seed: int = 1, dtype: th.dtype = th.float64) -> th.Tensor:
+    generator = th.Generator().manual_seed(seed)
+    states = th.randn(n_envs, 12, generator=generator) * th.tensor([3, 3, 0.05, 0.1, 0.1, 2, 1, 0.2, 0.1, 0.2, 0.2, 1])
+    states[:, 5] = th.remainder(states[:, 5] + np.pi, 2 * np.pi) - np.pi
+    return states.to(dtype)
+
+
+def pendulum_states(n_envs: int, seed: int = 1, dtype: th.dtype = th.float64) -> th.Tensor:
+    generator = th.Generator().manual_seed(seed)
+    angles = th.rand(n_envs, generator=generator) * 2 * np.pi - np.pi
+    return th.stack((th.cos(angles), th.sin(angles), th.randn(n_envs, generator=generator) * 3), dim=1).to(dtype)
+
+
+def plan_both_ways(policy: MPPIPolicy, states: th.Tensor, n_steps: int = 3, seed: int = 0):
+    """Runs ``n_steps`` warm-started planning steps with the optimised and the reference planner, same noise."""
+    planner = policy.planner
+    results = []
+    for planning_step in (planner.forward, planner.reference_forward):
+        generator = th.Generator().manual_seed(seed)
+        plan = planner.initial_plan(states.shape[0])
+        steps = []
+        with th.no_grad():
+            for _ in range(n_steps):
+                plan, action_std = planning_step(states, plan, policy.temperature, generator)
+                steps.append((plan.clone(), action_std.clone()))
+        results.append(steps)
+    return results
+
+
+def assert_same_plans(optimised, reference, atol=1e-9):
+    for (plan, action_std), (reference_plan, reference_std) in zip(optimised, reference):
+        assert th.allclose(plan, reference_plan, atol=atol, rtol=0), (plan - reference_plan).abs().max()
+        assert th.allclose(action_std, reference_std, atol=atol, rtol=0), (action_std - reference_std).abs().max()
+
+
+@pytest.mark.parametrize("n_envs", [1, 5])
+def test_bicycle_plans_match_the_reference(n_envs):
+    policy = make_policy(NAVIGATION, "bicycle", n_samples=256)
+    optimised, reference = plan_both_ways(policy, navigation_states(n_envs))
+    assert_same_plans(optimised, reference)
+    assert th.all(optimised[-1][1] > 0.01)  # the weights are not degenerate: the comparison is not vacuous
+
+
+def test_float32_plans_at_the_paper_settings_match_the_reference():
+    policy = make_policy(NAVIGATION, "bicycle", dtype=th.float32)  # N = 512, H = 10, J = 5
+    policy.temperature.fill_(1.0)
+    assert_same_plans(*plan_both_ways(policy, navigation_states(4, dtype=th.float32)), atol=1e-5)
+
+
+def test_pendulum_plans_match_the_reference():
+    policy = make_policy(PENDULUM, "pendulum", n_samples=256, horizon=15)
+    assert_same_plans(*plan_both_ways(policy, pendulum_states(4)))
+
+
+@pytest.mark.parametrize("switches", [dict(use_terminal_value=False), dict(use_step_cost=False)])
+def test_ablations_match_the_reference(switches):
+    policy = make_policy(NAVIGATION, "bicycle", n_samples=128, **switches)
+    assert_same_plans(*plan_both_ways(policy, navigation_states(3)))
+
+
+@pytest.mark.parametrize(
+    "network_kwargs",
+    [
+        dict(discriminator_hidden_sizes=(), value_hidden_sizes=()),
+        dict(discriminator_hidden_sizes=(16, 8, 8), use_spectral_norm=False),
+    ],
+)
+def test_other_network_shapes_match_the_reference(network_kwargs):
+    policy = make_policy(NAVIGATION, "bicycle", n_samples=128, **network_kwargs)
+    assert_same_plans(*plan_both_ways(policy, navigation_states(2)))
+
+
+def test_cache_sized_chunks_match_the_reference(monkeypatch):
+    # chunks smaller than one env's samples exercise the chunk copies and the partial last chunk
+    monkeypatch.setattr(fused, "CHUNK_ROWS", 700)
+    policy = make_policy(NAVIGATION, "bicycle", n_samples=200)
+    assert_same_plans(*plan_both_ways(policy, navigation_states(3)))
+
+
+def test_fused_views_are_used_only_when_planning():
+    policy = make_policy(NAVIGATION, "bicycle")
+    step_cost, value = policy.planner.step_cost, policy.planner.terminal_value
+    with th.no_grad():
+        assert step_cost.planning_view(12) is not None and value.planning_view(12) is not None
+        policy.set_training_mode(True)  # spectral norm's power iteration must keep running on every call
+        assert step_cost.planning_view(12) is None and value.planning_view(12) is None
+    policy.set_training_mode(False)
+    assert step_cost.planning_view(12) is None and value.planning_view(12) is None  # gradients enabled
+
+
+def test_planning_with_gradients_enabled_matches_the_reference():
+    policy = make_policy(NAVIGATION, "bicycle", n_samples=64)
+    states, planner = navigation_states(2), policy.planner
+    plan = planner(states, planner.initial_plan(2), policy.temperature, th.Generator().manual_seed(0)).plan
+    with th.no_grad():
+        generator = th.Generator().manual_seed(0)
+        expected = planner.reference_forward(states, planner.initial_plan(2), policy.temperature, generator)
+    assert th.allclose(plan.detach(), expected.plan, atol=1e-9, rtol=0)
+
+
+@pytest.mark.parametrize(
+    "model, states", [(KinematicBicycle(), navigation_states(3)), (PendulumDynamics(), pendulum_states(3))]
+)
+def test_batched_rollouts_match_step_by_step_rollouts(model, states):
+    generator = th.Generator().manual_seed(2)
+    action_dim = 2 if isinstance(model, KinematicBicycle) else 1
+    actions = th.rand(20, states.shape[0], 7, action_dim, generator=generator, dtype=states.dtype) * 2 - 1
+    if isinstance(model, PendulumDynamics):
+        actions = actions * 3  # beyond the torque limit, so the clamp is exercised
+    batched = rollout(model, states, actions)
+    step_by_step = rollout_step_by_step(model, states, actions)
+    assert batched.shape == step_by_step.shape
+    assert th.equal(batched[0], step_by_step[0].contiguous())
+    assert th.allclose(batched, step_by_step, atol=1e-10, rtol=0)
+
+
+def test_compiled_planner_matches_the_eager_one():
+    if not hasattr(th, "compile"):
+        pytest.skip("torch.compile is unavailable")
+    policy = make_policy(PENDULUM, "pendulum", n_samples=32, horizon=4, n_iterations=2, compile_planner=True)
+    try:
+        optimised, reference = plan_both_ways(policy, pendulum_states(2), n_steps=3)
+    except Exception as error:
+        if not type(error).__module__.startswith(("torch._dynamo", "torch._inductor")):
+            raise
+        pytest.skip(f"torch.compile does not work on this machine (no C++ toolchain?): {type(error).__name__}")
+    assert_same_plans(optimised, reference)
