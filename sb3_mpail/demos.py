@@ -60,12 +60,15 @@ def _episodes_from_npz(path: Path) -> List[np.ndarray]:
     return list(observations)
 
 
-def load_demos(demos: DemoSource, observation_space: spaces.Box) -> ExpertTransitions:
+def load_demos(
+    demos: DemoSource, observation_space: spaces.Box, space_name: str = "the environment's observation space"
+) -> ExpertTransitions:
     """
     Reads expert observations and checks them against the environment's observation space.
 
     :param demos: trajectories, transitions, an ``.npz`` path or an imitation ``serialize`` directory
-    :param observation_space: the environment's observation space
+    :param observation_space: the environment's observation space (or the space the demos must have)
+    :param space_name: how error messages name that space
     :return: the expert's ``(s, s')`` pairs
     :raises FileNotFoundError: the path does not exist
     :raises ValueError: shapes differ from the observation space, values are not finite, or the data is empty
@@ -92,8 +95,7 @@ def load_demos(demos: DemoSource, observation_space: spaces.Box) -> ExpertTransi
     expected = tuple(observation_space.shape)
     if transitions.observations.shape[1:] != expected:
         raise ValueError(
-            f"Demo observations have shape {transitions.observations.shape[1:]} but the environment's observation space "
-            f"has shape {expected}."
+            f"Demo observations have shape {transitions.observations.shape[1:]} but {space_name} has shape {expected}."
         )
     if len(transitions.observations) == 0:
         raise ValueError("The demos contain no transitions.")

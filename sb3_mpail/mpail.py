@@ -42,6 +42,9 @@ class MPAIL(BaseAlgorithm):
     :param policy: ``"MlpMPPI"`` or an :class:`~sb3_mpail.policies.MPPIPolicy` subclass
     :param env: env id, ``gym.Env`` or ``VecEnv`` (``None`` only when loading)
     :param demos: observation-only expert demos (see :func:`~sb3_mpail.demos.load_demos`); needed to train, not to plan
+    :param demos_are_features: the demos hold what the discriminator sees (the policy's ``discriminator_features``,
+        e.g. a partially observed demo), not full observations. ``False``: demos are observations and pass through
+        the same feature map as the agent's states
     :param n_steps: env steps per env per iteration
     :param gamma: discount of the learned reward in the value targets
     :param gae_lambda: GAE lambda of the value targets
@@ -77,6 +80,7 @@ class MPAIL(BaseAlgorithm):
         policy: Union[str, Type[MPPIPolicy]],
         env: Union[GymEnv, str] | None,
         demos: DemoSource | None = None,
+        demos_are_features: bool = False,
         n_steps: int = 200,
         gamma: float = 0.99,
         gae_lambda: float = 0.95,
@@ -113,6 +117,7 @@ class MPAIL(BaseAlgorithm):
             support_multi_env=True,
             seed=seed,
         )
+        self.demos_are_features = demos_are_features
         self.n_steps = n_steps
         self.gamma = gamma
         self.gae_lambda = gae_lambda
@@ -187,9 +192,17 @@ class MPAIL(BaseAlgorithm):
     def set_demos(self, demos: DemoSource) -> None:
         """
         Sets the expert demos (e.g. on a loaded model, to go on training); they are checked against the observation
-        space and never saved with the model.
+        space (the feature space with ``demos_are_features``), stored as discriminator features and never saved with
+        the model.
         """
-        self.expert = load_demos(demos, self.observation_space)
+        if self.demos_are_features:
+            self.expert = load_demos(demos, self.policy.feature_space, "the discriminator's feature space")
+            return
+        expert = load_demos(demos, self.observation_space)
+        with th.no_grad():
+            self.expert = ExpertTransitions(
+                *(self.policy.features(th.as_tensor(array)).cpu().numpy() for array in expert)
+            )
 
     def temperature(self) -> float:
         """The MPPI temperature after the episodes completed so far."""
@@ -318,7 +331,9 @@ class MPAIL(BaseAlgorithm):
         with th.no_grad():
             observations = th.as_tensor(buffer.flat("observations"), device=self.device)
             next_observations = th.as_tensor(buffer.flat("next_observations"), device=self.device)
-            rewards = self.policy.discriminator(observations, None, next_observations, None)
+            rewards = self.policy.discriminator(
+                self.policy.features(observations), None, self.policy.features(next_observations), None
+            )
             next_values = self.policy.value_net(next_observations).squeeze(-1)
             values = self.policy.value_net(observations).squeeze(-1)
             last_values = self.policy.value_net(th.as_tensor(last_obs, device=self.device)).squeeze(-1)
@@ -358,11 +373,13 @@ class MPAIL(BaseAlgorithm):
         expert_observations = th.as_tensor(self.expert.observations, device=self.device)
         expert_next_observations = th.as_tensor(self.expert.next_observations, device=self.device)
         discriminator = self.policy.discriminator
+        with th.no_grad():
+            agent_features, agent_next_features = self.policy.features(observations), self.policy.features(next_observations)
         losses, expert_accuracies, agent_accuracies = [], [], []
         for _ in range(self.n_epochs):
             for batch in self._minibatches(len(observations)):
                 expert_batch = th.randint(len(expert_observations), (len(batch),), device=self.device)
-                agent_logits = discriminator(observations[batch], None, next_observations[batch], None)
+                agent_logits = discriminator(agent_features[batch], None, agent_next_features[batch], None)
                 expert_logits = discriminator(
                     expert_observations[expert_batch], None, expert_next_observations[expert_batch], None
                 )

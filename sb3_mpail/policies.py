@@ -1,6 +1,6 @@
 """The MPPI "policy": no actor network, an online planner over a learned cost, value and a dynamics model."""
 
-from typing import Any, Dict, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, Sequence, Tuple, Union
 
 import numpy as np
 import torch as th
@@ -8,7 +8,13 @@ from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
 from torch import nn
 
-from sb3_mpail.mppi.costs import TerminalValue, TransitionCost, make_transition_discriminator, make_value_network
+from sb3_mpail.mppi.costs import (
+    FeatureMap,
+    TerminalValue,
+    TransitionCost,
+    make_transition_discriminator,
+    make_value_network,
+)
 from sb3_mpail.mppi.dynamics import DynamicsSpec, make_dynamics
 from sb3_mpail.mppi.planner import MPPIPlanner
 from sb3_mpail.mppi.sampling import GaussianSampler
@@ -35,6 +41,12 @@ class MPPIPolicy(BasePolicy):
     :param discriminator_hidden_sizes: hidden widths of the discriminator
     :param value_hidden_sizes: hidden widths of the value network
     :param use_spectral_norm: spectral normalisation on the discriminator's layers
+    :param discriminator_features: what the discriminator sees of a state: a fixed map ``features(states) ->
+        (batch, n_features)`` on ``(batch, state_dim)`` tensors (an ``nn.Module`` or a picklable function), applied to
+        ``s`` and ``s'`` before the discriminator, which is built on ``n_features`` inputs. The planner, the dynamics
+        and the value still use the full state. ``None``: the full observation. Its parameters, if any, are saved
+        but not trained. Functions are saved with cloudpickle (module-level functions by reference, so their
+        module must be importable when loading; lambdas and closures by value)
     :param sampler: replaces the Gaussian sampler: a module ``sampler(plan, n_samples, generator)`` returning
         time-major action sequences clamped to the bounds
     :param step_cost: replaces the discriminator cost in the planner: ``c(states, next_states)`` over any leading shape
@@ -59,6 +71,7 @@ class MPPIPolicy(BasePolicy):
         discriminator_hidden_sizes: Sequence[int] = (32, 32),
         value_hidden_sizes: Sequence[int] = (32, 32),
         use_spectral_norm: bool = True,
+        discriminator_features: Union[nn.Module, Callable[[th.Tensor], th.Tensor], None] = None,
         sampler: nn.Module | None = None,
         step_cost: nn.Module | None = None,
         terminal_value: nn.Module | None = None,
@@ -80,13 +93,19 @@ class MPPIPolicy(BasePolicy):
             discriminator_hidden_sizes=discriminator_hidden_sizes,
             value_hidden_sizes=value_hidden_sizes,
             use_spectral_norm=use_spectral_norm,
+            discriminator_features=discriminator_features,
             sampler=sampler,
             step_cost=step_cost,
             terminal_value=terminal_value,
             compile_planner=compile_planner,
         )
+        self.discriminator_features: nn.Module | None = None
+        self.feature_space = observation_space
+        if discriminator_features is not None:
+            self.discriminator_features = FeatureMap.wrap(discriminator_features)
+            self.feature_space = FeatureMap.space(self.discriminator_features, observation_space)
         self.discriminator = make_transition_discriminator(
-            observation_space, action_space, discriminator_hidden_sizes, use_spectral_norm
+            self.feature_space, action_space, discriminator_hidden_sizes, use_spectral_norm
         )
         self.value_net = make_value_network(observation_space.shape[0], value_hidden_sizes)
         self.dynamics = make_dynamics(dynamics, observation_space, action_space, dynamics_kwargs)
@@ -94,7 +113,7 @@ class MPPIPolicy(BasePolicy):
         self.planner = MPPIPlanner(
             dynamics=self.dynamics,
             sampler=sampler if sampler is not None else GaussianSampler(low, high, np.asarray(noise_std, dtype=np.float32)),
-            step_cost=step_cost if step_cost is not None else TransitionCost(self.discriminator),
+            step_cost=step_cost if step_cost is not None else TransitionCost(self.discriminator, self.discriminator_features),
             terminal_value=terminal_value if terminal_value is not None else TerminalValue(self.value_net),
             # the paper's zero mean, kept inside the bounds for spaces that exclude 0
             neutral_action=th.as_tensor(np.clip(np.zeros_like(low), low, high)),
@@ -114,6 +133,10 @@ class MPPIPolicy(BasePolicy):
 
     def _get_constructor_parameters(self) -> Dict[str, Any]:
         return {**super()._get_constructor_parameters(), **self._constructor_kwargs}
+
+    def features(self, states: th.Tensor) -> th.Tensor:
+        """What the discriminator sees of ``(batch, state_dim)`` states: ``discriminator_features`` or the states."""
+        return states if self.discriminator_features is None else self.discriminator_features(states)
 
     def seed(self, seed: int | None) -> None:
         """Re-seeds the planner's noise: the same seed gives the same plans and actions."""

@@ -5,8 +5,9 @@ In MPAIL the step cost is the negated discriminator logit, ``c(s, s') = -d_theta
 is the learned ``V_phi``, so both are thin views of networks the algorithm trains.
 """
 
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence, Union
 
+import numpy as np
 import torch as th
 from gymnasium import spaces
 from imitation.rewards.reward_nets import BasicRewardNet
@@ -54,34 +55,79 @@ def make_value_network(state_dim: int, hidden_sizes: Sequence[int] = (32, 32)) -
     return nn.Sequential(*create_mlp(state_dim, 1, list(hidden_sizes), nn.ReLU))
 
 
+class FeatureMap(nn.Module):
+    """
+    A fixed map from ``(batch, state_dim)`` states to ``(batch, n_features)`` discriminator features.
+
+    :param function: a plain function ``features(states) -> features`` on torch tensors
+    """
+
+    def __init__(self, function: Callable[[th.Tensor], th.Tensor]):
+        super().__init__()
+        self.function = function
+
+    @classmethod
+    def wrap(cls, features: Union[nn.Module, Callable[[th.Tensor], th.Tensor]]) -> nn.Module:
+        """The module itself, or a plain function wrapped in a :class:`FeatureMap`."""
+        if isinstance(features, nn.Module):
+            return features
+        if not callable(features):
+            raise TypeError(f"discriminator_features must be an nn.Module or a callable, got {type(features).__name__}.")
+        return cls(features)
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        return self.function(states)
+
+    @staticmethod
+    def space(features: nn.Module, observation_space: spaces.Box) -> spaces.Box:
+        """
+        The unbounded ``Box`` of the features, sized by mapping two zero states; refuses maps that do not give
+        ``(batch, n_features)``.
+
+        :param features: the feature map
+        :param observation_space: the states it maps
+        """
+        with th.no_grad():
+            probe = features(th.zeros((2, *observation_space.shape)))
+        if not isinstance(probe, th.Tensor) or probe.ndim != 2 or probe.shape[0] != 2:
+            shape = tuple(probe.shape) if isinstance(probe, th.Tensor) else type(probe).__name__
+            raise ValueError(
+                f"discriminator_features must map (batch, {observation_space.shape[0]}) states to a (batch, n_features) "
+                f"tensor; for a batch of 2 it gave {shape}."
+            )
+        return spaces.Box(-np.inf, np.inf, (probe.shape[1],), np.float32)
+
+
 class TransitionCost(nn.Module):
     """
-    Step cost ``c(s, s') = -d_theta(s, s')`` over any leading batch shape.
+    Step cost ``c(s, s') = -d_theta(phi(s), phi(s'))`` over any leading batch shape.
 
-    :param discriminator: the reward net giving the logit ``d_theta(s, s')``
+    :param discriminator: the reward net giving the logit ``d_theta``
+    :param features: the discriminator's feature map ``phi``; ``None``: the states themselves
     """
 
-    def __init__(self, discriminator: BasicRewardNet):
+    def __init__(self, discriminator: BasicRewardNet, features: Optional[nn.Module] = None):
         super().__init__()
         self.discriminator = discriminator
+        self.features = features
 
     def forward(self, states: th.Tensor, next_states: th.Tensor) -> th.Tensor:
         batch_shape = states.shape[:-1]
-        logits = self.discriminator(
-            states.reshape(-1, states.shape[-1]), None, next_states.reshape(-1, states.shape[-1]), None
-        )
-        return -logits.view(batch_shape)
+        states, next_states = states.reshape(-1, states.shape[-1]), next_states.reshape(-1, states.shape[-1])
+        if self.features is not None:
+            states, next_states = self.features(states), self.features(next_states)
+        return -self.discriminator(states, None, next_states, None).view(batch_shape)
 
     def planning_view(self, state_dim: int) -> Optional[FusedTransitionCost]:
         """
         The fused whole-horizon cost with the discriminator's weights frozen for one planning step, or ``None``
         where the module path must be used: gradients enabled, training mode (spectral norm's power iteration
-        then updates its vectors on every call) or a discriminator other than an MLP on ``(s, s')``.
+        then updates its vectors on every call), a feature map, or a discriminator other than an MLP on ``(s, s')``.
 
         :param state_dim: size of a state
         """
         net = self.discriminator
-        if th.is_grad_enabled() or net.training or not isinstance(net, BasicRewardNet):
+        if th.is_grad_enabled() or net.training or self.features is not None or not isinstance(net, BasicRewardNet):
             return None
         if not (net.use_state and net.use_next_state) or net.use_action or net.use_done:
             return None

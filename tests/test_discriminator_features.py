@@ -1,0 +1,130 @@
+"""The discriminator can see chosen features of the state while the planner, dynamics and value use the full state."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from imitation.data.types import Trajectory
+from stable_baselines3.common.env_util import make_vec_env
+from torch import nn
+
+from sb3_mpail import MPAIL
+
+TINY_PLANNER = dict(n_samples=16, horizon=3, n_iterations=2)
+
+
+def pendulum_angle(states: th.Tensor) -> th.Tensor:
+    """Pendulum features without the angular velocity: ``[cos(theta), sin(theta)]``."""
+    return states[:, :2]
+
+
+class ScaledAngle(nn.Module):
+    """A feature module with a saved (untrained) parameter."""
+
+    def __init__(self):
+        super().__init__()
+        self.scale = nn.Parameter(th.tensor([2.0, -3.0]))
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        return states[:, :2] * self.scale
+
+
+@pytest.fixture(scope="module")
+def demo_observations():
+    env = gym.make("Pendulum-v1")
+    env.action_space.seed(0)
+    episodes = []
+    for index in range(2):
+        observations = [env.reset(seed=index)[0]]
+        for _ in range(30):
+            observations.append(env.step(env.action_space.sample())[0])
+        episodes.append(np.array(observations, np.float32))
+    return episodes
+
+
+def trajectories(episodes):
+    return [Trajectory(obs=obs, acts=np.zeros((len(obs) - 1, 1), np.float32), infos=None, terminal=False) for obs in episodes]
+
+
+def make_model(demos, features=pendulum_angle, seed=0, **kwargs):
+    return MPAIL(
+        "MlpMPPI",
+        make_vec_env("Pendulum-v1", n_envs=1, seed=seed),
+        demos,
+        n_steps=16,
+        seed=seed,
+        policy_kwargs=dict(TINY_PLANNER, discriminator_features=features),
+        **kwargs,
+    )
+
+
+def first_layer_inputs(model: MPAIL) -> int:
+    return next(layer for layer in model.policy.discriminator.mlp.modules() if isinstance(layer, nn.Linear)).in_features
+
+
+def test_discriminator_is_built_on_the_feature_size_and_demos_are_mapped(demo_observations):
+    model = make_model(trajectories(demo_observations))
+    assert first_layer_inputs(model) == 4  # (phi(s), phi(s')) with 2 features each, not 2 x 3 observations
+    assert model.policy.value_net[0].in_features == 3  # the value still sees the full state
+    expected = np.concatenate([episode[:-1, :2] for episode in demo_observations])
+    np.testing.assert_array_equal(model.expert.observations, expected)
+
+
+def test_rewards_and_planner_costs_see_only_the_features(demo_observations):
+    model = make_model(trajectories(demo_observations)).learn(32)
+    buffer = model.rollout_buffer
+    observations = th.as_tensor(buffer.flat("observations"))
+    next_observations = th.as_tensor(buffer.flat("next_observations"))
+    with th.no_grad():
+        logits = model.policy.discriminator(observations[:, :2], None, next_observations[:, :2], None)
+    kept = buffer.flat("timeouts") == 0  # time-limit steps also hold the bootstrapped value
+    np.testing.assert_allclose(buffer.flat("rewards")[kept], logits.numpy()[kept])
+    # states differing only in the unseen velocity cost the same; the fused path, which sees whole states, is off
+    cost = model.policy.planner.step_cost
+    model.policy.set_training_mode(False)
+    with th.no_grad():
+        assert cost.planning_view(3) is None
+        states = th.tensor([[1.0, 0.0, 0.0], [1.0, 0.0, 5.0]])
+        next_states = th.tensor([[0.9, 0.1, 1.0], [0.9, 0.1, -4.0]])
+        costs = cost(states, next_states)
+        expected = -model.policy.discriminator(states[:, :2], None, next_states[:, :2], None)
+    assert th.allclose(costs, expected)
+    assert costs[0].item() == pytest.approx(costs[1].item())
+
+
+def test_demos_can_already_be_features(demo_observations):
+    partial = [episode[:, :2] for episode in demo_observations]
+    model = make_model(trajectories(partial), demos_are_features=True).learn(32)
+    np.testing.assert_array_equal(model.expert.observations, np.concatenate([episode[:-1] for episode in partial]))
+    with pytest.raises(ValueError, match=r"shape \(3,\) but the discriminator's feature space has shape \(2,\)"):
+        make_model(trajectories(demo_observations), demos_are_features=True)
+    with pytest.raises(ValueError, match=r"shape \(2,\) but the environment's observation space has shape \(3,\)"):
+        make_model(trajectories(partial))
+
+
+@pytest.mark.parametrize(
+    "features", [pendulum_angle, lambda states: states[:, 1:] * 2.0, ScaledAngle()], ids=["function", "lambda", "module"]
+)
+def test_feature_map_survives_save_and_load(demo_observations, tmp_path, features):
+    model = make_model(trajectories(demo_observations), features=features).learn(32)
+    model.save(tmp_path / "model")
+    loaded = MPAIL.load(tmp_path / "model")
+    states = th.as_tensor(np.random.default_rng(0).normal(size=(5, 3)).astype(np.float32))
+    assert th.equal(loaded.policy.features(states), model.policy.features(states))
+    for (name, a), (_, b) in zip(model.policy.state_dict().items(), loaded.policy.state_dict().items()):
+        assert th.equal(a, b), name
+    model.set_random_seed(1)
+    loaded.set_random_seed(1)
+    np.testing.assert_array_equal(
+        model.predict(states.numpy(), deterministic=True)[0], loaded.predict(states.numpy(), deterministic=True)[0]
+    )
+    # a loaded model maps new full-observation demos through the same features
+    loaded.set_demos(trajectories(demo_observations))
+    np.testing.assert_array_equal(loaded.expert.observations, model.expert.observations)
+
+
+def test_feature_map_of_the_wrong_shape_is_refused(demo_observations):
+    with pytest.raises(ValueError, match=r"\(batch, n_features\) tensor; for a batch of 2 it gave \(2,\)"):
+        make_model(trajectories(demo_observations), features=lambda states: states[:, 0])
+    with pytest.raises(TypeError, match="discriminator_features must be an nn.Module or a callable"):
+        make_model(trajectories(demo_observations), features="angle")
