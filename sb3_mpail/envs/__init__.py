@@ -13,3 +13,11 @@ if "sb3_mpail/Navigation-v0" not in gym.registry:
     )
 
 __all__ = ["NavigationEnv"]
+
+# Continuous-action cartpole (gymnasium CartPole-v1 physics, force action in [-1, 1] x 10 N), 200-step episodes.
+if "sb3_mpail/ContinuousCartPole-v0" not in gym.registry:
+    gym.register(
+        id="sb3_mpail/ContinuousCartPole-v0",
+        entry_point="sb3_mpail.envs.cartpole:ContinuousCartPoleEnv",
+        max_episode_steps=200,
+    )

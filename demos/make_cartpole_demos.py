@@ -1,0 +1,202 @@
+"""Generate observation-only expert demonstrations for ``sb3_mpail/ContinuousCartPole-v0``.
+
+This script:
+
+1. trains a Stable-Baselines3 PPO expert on the env's own reward (+1 per step alive, 200-step episodes) with
+   rl-zoo's ``CartPole-v1`` PPO hyperparameters (8 envs, ``n_steps=32``, ``batch_size=256``, ``gae_lambda=0.8``,
+   ``gamma=0.98``, ``n_epochs=20``, ``ent_coef=0``, linearly decaying ``learning_rate=1e-3``, ``clip_range``
+   0.2 decaying linearly), Gaussian policy on the continuous force;
+2. evaluates the deterministic expert and a uniform-random policy on 100 seeded episodes each;
+3. records ``--n-demos`` episodes with the deterministic expert (episode ``i`` starts from
+   ``env.reset(seed=1000 + i)``) and keeps only the observations (no actions). Full 200-step episodes give
+   ``<out-dir>/cartpole_<n>.npz`` with key ``obs`` of shape ``(n, 201, 4)`` (float32); if some episode ended
+   early, ``obs`` is 2-D (all episodes concatenated) with ``episode_lengths``;
+4. writes the metadata file ``<out-dir>/cartpole.json`` (same schema as ``pendulum.json``).
+
+The trained expert model is not saved. The script is deterministic for a fixed ``--seed`` (single-threaded torch,
+seeded PPO, environments and action spaces).
+
+Run from the repository root::
+
+    python demos/make_cartpole_demos.py
+    python demos/make_cartpole_demos.py --timesteps 100000 --seed 0 --n-demos 4
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.utils import get_linear_fn, set_random_seed
+
+import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/ContinuousCartPole-v0)
+
+ENV_ID = "sb3_mpail/ContinuousCartPole-v0"
+N_EVAL_EPISODES = 100
+DEMO_SEED_OFFSET = 1000
+DEFAULT_OUT_DIR = Path(__file__).resolve().parent
+
+
+def parse_args() -> argparse.Namespace:
+    """Parse the command-line arguments.
+
+    :return: The parsed arguments (``timesteps``, ``seed``, ``out_dir``, ``n_demos``).
+    """
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--timesteps", type=int, default=100_000, help="PPO training timesteps for the expert")
+    parser.add_argument("--seed", type=int, default=0, help="Random seed (PPO, environments, numpy)")
+    parser.add_argument("--out-dir", type=Path, default=DEFAULT_OUT_DIR, help="Output folder for the .npz and .json files")
+    parser.add_argument("--n-demos", type=int, default=4, help="Number of observation-only demonstrations to record")
+    return parser.parse_args()
+
+
+def train_expert(timesteps: int, seed: int) -> tuple[PPO, float]:
+    """Train a PPO expert on ``sb3_mpail/ContinuousCartPole-v0``.
+
+    :param timesteps: Number of environment steps to train for.
+    :param seed: Seed for PPO (torch, numpy, python ``random``) and the training environments.
+    :return: The trained model and the wall-clock training time in seconds.
+    """
+    env = make_vec_env(ENV_ID, n_envs=8, seed=seed)
+    # rl-zoo hyperparameters for CartPole-v1 (PPO), on the continuous force
+    model = PPO(
+        "MlpPolicy",
+        env,
+        n_steps=32,
+        batch_size=256,
+        gae_lambda=0.8,
+        gamma=0.98,
+        n_epochs=20,
+        ent_coef=0.0,
+        learning_rate=get_linear_fn(1e-3, 0.0, 1.0),
+        clip_range=get_linear_fn(0.2, 0.0, 1.0),
+        seed=seed,
+        verbose=0,
+        device="cpu",
+    )
+    start = time.perf_counter()
+    model.learn(total_timesteps=timesteps)
+    train_seconds = time.perf_counter() - start
+    env.close()
+    return model, train_seconds
+
+
+def evaluate_expert(model: PPO, seed: int, n_episodes: int = N_EVAL_EPISODES) -> tuple[float, float]:
+    """Evaluate the deterministic expert on a seeded evaluation environment.
+
+    :param model: The trained PPO expert.
+    :param seed: Seed of the evaluation environment.
+    :param n_episodes: Number of evaluation episodes.
+    :return: Mean and standard deviation of the episode returns.
+    """
+    eval_env = make_vec_env(ENV_ID, n_envs=1, seed=seed)
+    mean, std = evaluate_policy(model, eval_env, n_eval_episodes=n_episodes, deterministic=True)
+    eval_env.close()
+    return float(mean), float(std)
+
+
+def evaluate_random(seed: int, n_episodes: int = N_EVAL_EPISODES) -> tuple[float, float]:
+    """Evaluate a uniform-random policy (``action_space.sample`` with a seeded space).
+
+    :param seed: Seed for the environment's first reset and for the action space.
+    :param n_episodes: Number of evaluation episodes.
+    :return: Mean and standard deviation of the episode returns.
+    """
+    env = gym.make(ENV_ID)
+    env.action_space.seed(seed)
+    returns: list[float] = []
+    for episode in range(n_episodes):
+        # Seed only the first reset; later resets continue the seeded RNG stream
+        env.reset(seed=seed if episode == 0 else None)
+        done, ep_return = False, 0.0
+        while not done:
+            _, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+            ep_return += float(reward)
+            done = terminated or truncated
+        returns.append(ep_return)
+    env.close()
+    return float(np.mean(returns)), float(np.std(returns))
+
+
+def record_demos(model: PPO, n_demos: int) -> tuple[list[np.ndarray], list[float]]:
+    """Record observation-only demonstrations with the deterministic expert.
+
+    :param model: The trained PPO expert.
+    :param n_demos: Number of episodes to record; episode ``i`` uses ``reset(seed=1000 + i)``.
+    :return: Float32 observations per episode, each ``(T_i + 1, 4)``, and the per-demo returns.
+    """
+    env = gym.make(ENV_ID)
+    all_obs: list[np.ndarray] = []
+    demo_returns: list[float] = []
+    for i in range(n_demos):
+        obs, _ = env.reset(seed=DEMO_SEED_OFFSET + i)
+        episode_obs = [obs]
+        done, ep_return = False, 0.0
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            episode_obs.append(obs)  # keep the final observation too (T + 1 in total)
+            ep_return += float(reward)
+            done = terminated or truncated
+        all_obs.append(np.asarray(episode_obs, dtype=np.float32))
+        demo_returns.append(ep_return)
+    env.close()
+    return all_obs, demo_returns
+
+
+def main() -> None:
+    """Train the expert, evaluate it, record the demos and write the metadata."""
+    args = parse_args()
+    torch.set_num_threads(1)
+    set_random_seed(args.seed)
+    out_dir: Path = args.out_dir
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    model, train_seconds = train_expert(args.timesteps, args.seed)
+    # Distinct seeds for training and evaluation environments
+    expert_mean, expert_std = evaluate_expert(model, seed=args.seed + 1)
+    random_mean, random_std = evaluate_random(seed=args.seed + 2)
+    print(f"expert return: {expert_mean:.1f} +/- {expert_std:.1f} ({train_seconds:.0f}s training)")
+    print(f"random return: {random_mean:.1f} +/- {random_std:.1f}")
+
+    episodes, demo_returns = record_demos(model, args.n_demos)
+    npz_path = out_dir / f"cartpole_{args.n_demos}.npz"
+    lengths = [len(episode) for episode in episodes]
+    if len(set(lengths)) == 1:
+        obs = np.stack(episodes)
+        np.savez_compressed(npz_path, obs=obs)
+    else:
+        obs = np.concatenate(episodes)
+        np.savez_compressed(npz_path, obs=obs, episode_lengths=np.asarray(lengths, dtype=np.int64))
+    print(f"saved demos {obs.shape} (episode lengths {lengths}) to {npz_path}; demo returns: {demo_returns}")
+
+    meta: dict[str, Any] = {
+        "env_id": ENV_ID,
+        "expert_algo": "PPO",
+        "expert_timesteps": args.timesteps,
+        "seed": args.seed,
+        "expert_return_mean": expert_mean,
+        "expert_return_std": expert_std,
+        "random_return_mean": random_mean,
+        "random_return_std": random_std,
+        "n_eval_episodes": N_EVAL_EPISODES,
+        "demo_returns": demo_returns,
+        "command": "python demos/make_cartpole_demos.py",
+        "train_seconds": round(train_seconds, 1),
+    }
+    json_path = out_dir / "cartpole.json"
+    json_path.write_text(json.dumps(meta, indent=2) + "\n")
+    print(f"saved metadata to {json_path}")
+
+
+if __name__ == "__main__":
+    main()
