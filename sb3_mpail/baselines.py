@@ -1,0 +1,684 @@
+"""
+The algorithms of the benchmark grid, trained on the same observation-only demos and the same env-step budget,
+built on the ``imitation`` library and Stable-Baselines3:
+
+* ``mpail``: :class:`~sb3_mpail.MPAIL`.
+* ``gail``: imitation's GAIL, PPO generator, state-only discriminator ``d(s, s')`` (MPAIL's discriminator,
+  :func:`~sb3_mpail.mppi.costs.make_transition_discriminator`; dummy zero actions in the demos, never read).
+* ``airl``: **AIRL (obs-only)**. imitation's AIRL subtracts ``log pi(a_expert | s)`` from its logit, meaningless
+  without expert actions, so this is imitation's adversarial trainer with AIRL's shaped state-only reward
+  ``f(s, s') = g(s) + gamma h(s') - h(s)`` (``BasicShapedRewardNet``) as the logit, no policy term, PPO generator.
+* ``bc``: imitation's BC. It **uses expert actions**: ``demos/<env>_<n>_actions.npz`` (:func:`make_action_demos`).
+* ``irl_mpc``: the GAIL-learned reward and critic deployed through MPAIL's MPPI planner with no further training:
+  the GAIL run of ``zoo_configs/gail.yml``, its discriminator as step cost ``log(1 - D(s, s'))`` (the negated GAIL
+  reward) and its PPO critic as terminal value. Its env steps are GAIL's.
+
+Hyperparameters come from ``zoo_configs/<algo>.yml`` (rl_zoo3's layout, :func:`load_config`).
+
+Action-labelled demos for BC: ``python -m sb3_mpail.baselines make-action-demos --env navigation``.
+"""
+
+import argparse
+import importlib.util
+import json
+import tempfile
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+import gymnasium as gym
+import numpy as np
+import torch as th
+import yaml
+from imitation.algorithms import bc as imitation_bc
+from imitation.algorithms.adversarial.common import AdversarialTrainer
+from imitation.algorithms.adversarial.gail import GAIL
+from imitation.data import rollout, types
+from imitation.rewards.reward_nets import BasicShapedRewardNet, RewardNet
+from imitation.util import logger as imitation_logger
+from imitation.util import networks
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.policies import ActorCriticPolicy
+from stable_baselines3.common.vec_env import VecEnv
+from torch import nn
+from torch.nn import functional as F
+from torch.nn.utils.parametrizations import spectral_norm
+
+import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
+from sb3_mpail.demos import load_demos
+from sb3_mpail.mppi.costs import make_transition_discriminator
+from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, PendulumDynamics
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+CONFIG_DIR = REPO_ROOT / "zoo_configs"
+DEMO_DIR = REPO_ROOT / "demos"
+
+ALGOS: Tuple[str, ...] = ("mpail", "gail", "airl", "bc", "irl_mpc")
+#: names used in every table and figure
+ALGO_LABELS: Dict[str, str] = {
+    "mpail": "MPAIL",
+    "gail": "GAIL (state-only)",
+    "airl": "AIRL (obs-only)",
+    "bc": "BC (uses expert actions)",
+    "irl_mpc": "IRL-MPC (GAIL reward + critic via MPPI)",
+}
+#: short names of the benchmark's environments (the demo files' prefix)
+ENV_NAMES: Dict[str, str] = {"sb3_mpail/Navigation-v0": "navigation", "Pendulum-v1": "pendulum"}
+#: keys of a config entry that are strings of Python expressions (rl_zoo3 evaluates ``policy_kwargs`` this way)
+EXPRESSION_KEYS = ("policy_kwargs", "reward_net_kwargs")
+#: keys of a config entry that describe the run rather than the algorithm
+META_KEYS = ("n_timesteps", "n_envs", "demos")
+#: keys of ``gail.yml``/``airl.yml`` for the adversarial trainer; the others go to PPO
+ADVERSARIAL_KEYS = ("demo_batch_size", "n_disc_updates_per_round", "disc_learning_rate", "disc_betas", "reward_net_kwargs")
+
+#: ``on_eval(env_steps, {algo: predictor})``: called during training with anything SB3's ``predict`` works on
+EvalHook = Callable[[int, Dict[str, Any]], None]
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# configs and demos
+
+
+def env_id_of(env: str) -> str:
+    """
+    The gymnasium id of ``env``.
+
+    :param env: an id or a short name (``navigation``, ``pendulum``)
+    """
+    return {name: env_id for env_id, name in ENV_NAMES.items()}.get(env, env)
+
+
+def env_name_of(env_id: str) -> str:
+    """
+    The short name of ``env_id`` (the prefix of its demo files).
+
+    :param env_id: a gymnasium id
+    """
+    return ENV_NAMES.get(env_id, env_id.split("/")[-1].split("-")[0].lower())
+
+
+def load_config(algo: str, env_id: str, config_dir: Path = CONFIG_DIR) -> Dict[str, Any]:
+    """
+    The entry of ``env_id`` in ``<config_dir>/<algo>.yml`` (rl_zoo3's layout) with its ``policy_kwargs`` and
+    ``reward_net_kwargs`` strings evaluated as rl_zoo3 does. ``irl_mpc``'s entry also gets ``gail``: the GAIL entry
+    whose reward and critic it deploys (same ``n_timesteps``, ``n_envs`` and ``demos``, checked).
+
+    :param algo: one of :data:`ALGOS`
+    :param env_id: the gymnasium id (the YAML key)
+    :param config_dir: folder of the YAML files
+    :raises ValueError: the file has no entry for ``env_id``, or IRL-MPC's entry disagrees with GAIL's
+    """
+    path = Path(config_dir) / f"{algo}.yml"
+    entry = (yaml.safe_load(path.read_text()) or {}).get(env_id)
+    if entry is None:
+        raise ValueError(f"{path} has no entry for {env_id}.")
+    entry = dict(entry)
+    for key in EXPRESSION_KEYS:
+        if isinstance(entry.get(key), str):
+            # rl_zoo3 evaluates these strings with eval() too; literals, dict() and torch.nn suffice here
+            entry[key] = eval(entry[key], {"__builtins__": {}, "dict": dict, "nn": nn})  # noqa: S307
+    entry["n_timesteps"] = int(float(entry["n_timesteps"]))
+    if algo == "irl_mpc":
+        entry["gail"] = load_config("gail", env_id, config_dir)
+        for key in META_KEYS:
+            if entry[key] != entry["gail"][key]:
+                raise ValueError(f"irl_mpc.yml's {key} for {env_id} must equal gail.yml's (IRL-MPC deploys that run).")
+    return entry
+
+
+def expert_stats(env_id: str, demo_dir: Path = DEMO_DIR) -> Dict[str, Any]:
+    """
+    ``demos/<env>.json``: the expert's and the random policy's mean returns (the normalised score's 1 and 0).
+
+    :param env_id: gymnasium id
+    :param demo_dir: folder of the demos
+    """
+    return json.loads((Path(demo_dir) / f"{env_name_of(env_id)}.json").read_text())
+
+
+def normalised_score(episode_return: float, stats: Dict[str, Any]) -> float:
+    """
+    ``(R - random) / (expert - random)``: 0 is the random policy, 1 the expert.
+
+    :param episode_return: an undiscounted return
+    :param stats: :func:`expert_stats`
+    """
+    random_return, expert_return = stats["random_return_mean"], stats["expert_return_mean"]
+    return float((episode_return - random_return) / (expert_return - random_return))
+
+
+def action_demos_path(path: Path | str) -> Path:
+    """
+    The action-labelled twin of an observation-only demo file: ``navigation_4.npz`` -> ``navigation_4_actions.npz``.
+
+    :param path: observation-only demos
+    """
+    path = Path(path)
+    return path.with_name(f"{path.stem}_actions{path.suffix}")
+
+
+def observation_only_transitions(path: Path | str, env: VecEnv) -> types.Transitions:
+    """
+    The demos as imitation ``Transitions`` for a state-only discriminator: real ``(s, s')``, dummy zero actions
+    (imitation requires ``acts``; the reward nets here never read them).
+
+    :param path: observation-only ``.npz`` demos
+    :param env: the training env (its spaces check the demos)
+    """
+    pairs = load_demos(path, env.observation_space)
+    n = len(pairs.observations)
+    return types.Transitions(
+        obs=pairs.observations, acts=np.zeros((n, *env.action_space.shape), np.float32), infos=np.array([{}] * n),
+        next_obs=pairs.next_observations, dones=np.zeros(n, dtype=bool),
+    )  # fmt: skip
+
+
+def action_transitions(path: Path | str) -> types.Transitions:
+    """
+    Expert transitions with actions for BC, from the action-labelled twin of ``path``.
+
+    :param path: the observation-only demo file; its ``_actions`` twin is read
+    :raises FileNotFoundError: the action-labelled file is missing (make it with :func:`make_action_demos`)
+    """
+    labelled = action_demos_path(path)
+    if not labelled.exists():
+        raise FileNotFoundError(
+            f"BC needs expert actions: {labelled} is missing; make it with "
+            "`python -m sb3_mpail.baselines make-action-demos --env <name>`."
+        )
+    with np.load(labelled) as data:
+        observations, actions = data["obs"], data["acts"]
+    trajectories = [types.Trajectory(obs=o, acts=a, infos=None, terminal=True) for o, a in zip(observations, actions)]
+    return rollout.flatten_trajectories(trajectories)
+
+
+def evaluate(
+    predictor: Any, env_id: str, n_episodes: int, seed: int, env_kwargs: Optional[Dict[str, Any]] = None
+) -> List[types.TrajectoryWithRew]:
+    """
+    One deterministic episode in each of ``n_episodes`` envs at once (env ``i`` reset with ``seed + i``), through
+    imitation's ``rollout.generate_trajectories`` (which carries recurrent state, here MPPI's plans).
+
+    :param predictor: an SB3 algorithm or policy (MPAIL, PPO, an MPPI or BC policy)
+    :param env_id: gymnasium id
+    :param n_episodes: episodes (= parallel envs)
+    :param seed: seed of the first env
+    :param env_kwargs: ``gym.make`` keyword arguments, e.g. ``dict(start_region="ood")``
+    """
+    env = make_vec_env(env_id, n_envs=n_episodes, seed=seed, env_kwargs=env_kwargs)
+    try:
+        return rollout.generate_trajectories(
+            predictor, env, rollout.make_min_episodes(n_episodes), np.random.default_rng(seed), deterministic_policy=True
+        )
+    finally:
+        env.close()
+
+
+class _EvalSchedule:
+    """
+    Calls ``on_eval`` when the env-step count passes each multiple of ``eval_every`` (and when forced), on a forked
+    torch RNG so that evaluating does not change the training run.
+
+    :param eval_every: env steps between evaluations; 0: only forced ones
+    :param on_eval: the hook, or ``None``
+    """
+
+    def __init__(self, eval_every: int, on_eval: Optional[EvalHook]):
+        self.eval_every = eval_every
+        self.on_eval = on_eval
+        self.last_step: Optional[int] = None
+
+    def __call__(self, steps: int, predictors: Callable[[], Dict[str, Any]], force: bool = False) -> None:
+        if self.on_eval is None or steps == self.last_step:
+            return
+        passed = self.eval_every > 0 and (
+            self.last_step is None or steps // self.eval_every > self.last_step // self.eval_every
+        )
+        if force or passed:
+            self.last_step = steps
+            with th.random.fork_rng():
+                self.on_eval(steps, predictors())
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# GAIL, AIRL (obs-only), IRL-MPC
+
+
+def _quiet_logger() -> imitation_logger.HierarchicalLogger:
+    return imitation_logger.configure(tempfile.mkdtemp(prefix="sb3_mpail_baseline_"), format_strs=[])
+
+
+def state_only_airl_reward(
+    env: VecEnv, hid_sizes: Sequence[int] = (32, 32), discount: float = 0.99, use_spectral_norm: bool = True
+) -> BasicShapedRewardNet:
+    """
+    AIRL's shaped reward ``f(s, s') = g(s) + discount h(s') - h(s)`` with state-only ``g`` and ``h`` (LeakyReLU,
+    spectral norm on every linear layer, as MPAIL's discriminator).
+
+    :param env: the training env (its spaces)
+    :param hid_sizes: hidden widths of ``g`` and ``h``
+    :param discount: the shaping discount (the generator's gamma)
+    :param use_spectral_norm: spectral normalisation on every linear layer
+    """
+    net = BasicShapedRewardNet(
+        env.observation_space, env.action_space, use_state=True, use_action=False, use_next_state=False, use_done=False,
+        reward_hid_sizes=tuple(hid_sizes), potential_hid_sizes=tuple(hid_sizes), discount_factor=discount,
+        activation=nn.LeakyReLU,
+    )  # fmt: skip
+    if use_spectral_norm:
+        for mlp in (net.base.mlp, net.potential._potential_net):
+            for name, layer in list(mlp.named_children()):
+                if isinstance(layer, nn.Linear):
+                    setattr(mlp, name, spectral_norm(layer))
+    return net
+
+
+class ObsOnlyAIRL(AdversarialTrainer):
+    """
+    **AIRL (obs-only)**: imitation's adversarial trainer with AIRL's shaped state-only reward as the discriminator
+    logit and *no* ``- log pi(a | s)`` term; the generator's reward is that logit, ``log D - log(1 - D)``.
+    """
+
+    def logits_expert_is_high(
+        self,
+        state: th.Tensor,
+        action: th.Tensor,
+        next_state: th.Tensor,
+        done: th.Tensor,
+        log_policy_act_prob: Optional[th.Tensor] = None,
+    ) -> th.Tensor:
+        return self._reward_net(state, action, next_state, done)
+
+    @property
+    def reward_train(self) -> RewardNet:
+        return self._reward_net
+
+    @property
+    def reward_test(self) -> RewardNet:
+        return self._reward_net.base
+
+
+def make_adversarial(algo: str, env: VecEnv, demos: Path | str, seed: int, hyperparams: Dict[str, Any]) -> AdversarialTrainer:
+    """
+    A GAIL or AIRL (obs-only) trainer with a PPO generator.
+
+    :param algo: ``gail`` or ``airl``
+    :param env: the training env
+    :param demos: observation-only demos
+    :param seed: PPO's seed
+    :param hyperparams: the config entry without :data:`META_KEYS`; keys other than :data:`ADVERSARIAL_KEYS` go to PPO
+    """
+    ppo_kwargs = {key: value for key, value in hyperparams.items() if key not in ADVERSARIAL_KEYS}
+    generator = PPO(ppo_kwargs.pop("policy", "MlpPolicy"), env, seed=seed, device="cpu", verbose=0, **ppo_kwargs)
+    transitions = observation_only_transitions(demos, env)
+    net_kwargs = dict(hyperparams.get("reward_net_kwargs") or {})
+    hid_sizes, use_spectral_norm = net_kwargs.get("hid_sizes", (32, 32)), net_kwargs.get("spectral_norm", True)
+    if algo == "gail":
+        trainer_class: type = GAIL
+        reward_net: RewardNet = make_transition_discriminator(env.observation_space, env.action_space, hid_sizes,
+                                                              use_spectral_norm)  # fmt: skip
+    else:
+        trainer_class = ObsOnlyAIRL
+        reward_net = state_only_airl_reward(env, hid_sizes, generator.gamma, use_spectral_norm)
+    return trainer_class(
+        demonstrations=transitions,
+        demo_batch_size=min(int(hyperparams.get("demo_batch_size", 256)), len(transitions)),
+        venv=env,
+        gen_algo=generator,
+        reward_net=reward_net,
+        n_disc_updates_per_round=int(hyperparams.get("n_disc_updates_per_round", 4)),
+        disc_opt_kwargs=dict(lr=float(hyperparams.get("disc_learning_rate", 3e-4)),
+                             betas=tuple(hyperparams.get("disc_betas", (0.5, 0.999)))),
+        custom_logger=_quiet_logger(),
+        allow_variable_horizon=False,
+    )  # fmt: skip
+
+
+class GAILRewardCost(nn.Module):
+    """
+    Planner step cost ``c(s, s') = -r_GAIL(s, s') = log sigmoid(-d(s, s'))`` over any leading batch shape.
+
+    :param discriminator: the state-only discriminator logit ``d``
+    """
+
+    def __init__(self, discriminator: RewardNet):
+        super().__init__()
+        self.discriminator = discriminator
+
+    def forward(self, states: th.Tensor, next_states: th.Tensor) -> th.Tensor:
+        flat = states.reshape(-1, states.shape[-1]), next_states.reshape(-1, states.shape[-1])
+        return F.logsigmoid(-self.discriminator(flat[0], None, flat[1], None)).view(states.shape[:-1])
+
+
+class CriticValue(nn.Module):
+    """
+    Planner terminal value ``V(s)`` from a PPO actor-critic's value head, over any leading batch shape.
+
+    :param policy: the actor-critic
+    """
+
+    def __init__(self, policy: ActorCriticPolicy):
+        super().__init__()
+        self.policy = policy
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        return self.policy.predict_values(states.reshape(-1, states.shape[-1])).view(states.shape[:-1])
+
+
+def irl_mpc_policy(trainer: GAIL, env_id: str, hyperparams: Dict[str, Any]) -> nn.Module:
+    """
+    IRL-MPC: an :class:`~sb3_mpail.policies.MPPIPolicy` planning with copies of GAIL's discriminator (step cost
+    :class:`GAILRewardCost`) and of its PPO critic (terminal value; ``value: none`` drops it). Nothing is trained.
+
+    :param trainer: a GAIL trainer (state-only discriminator)
+    :param env_id: the env (its planning model is ``DEFAULT_DYNAMICS[env_id]`` unless ``policy_kwargs`` names one)
+    :param hyperparams: :func:`load_config`'s ``irl_mpc`` entry: ``policy_kwargs`` (the planner), ``temperature``,
+        ``value`` and ``gail`` (the discriminator's ``reward_net_kwargs``)
+    """
+    from sb3_mpail.policies import MPPIPolicy
+
+    planner_kwargs = dict(hyperparams.get("policy_kwargs") or {})
+    value = hyperparams.get("value", "gail_critic")
+    if value not in ("gail_critic", "none"):
+        raise ValueError(f"irl_mpc value must be 'gail_critic' or 'none', got {value!r}.")
+    net_kwargs = dict(hyperparams["gail"].get("reward_net_kwargs") or {})
+    discriminator = make_transition_discriminator(
+        trainer.venv.observation_space,
+        trainer.venv.action_space,
+        net_kwargs.get("hid_sizes", (32, 32)),
+        net_kwargs.get("spectral_norm", True),
+    )
+    discriminator.load_state_dict(trainer._reward_net.state_dict())  # copies: evaluating must not touch GAIL's nets
+    generator = trainer.gen_algo.policy
+    critic = type(generator)(**generator._get_constructor_parameters())  # as SB3's BasePolicy.load rebuilds a policy
+    critic.load_state_dict(generator.state_dict())
+    policy = MPPIPolicy(
+        trainer.venv.observation_space,
+        trainer.venv.action_space,
+        dynamics=planner_kwargs.pop("dynamics", DEFAULT_DYNAMICS.get(env_id)),
+        step_cost=GAILRewardCost(discriminator),
+        terminal_value=CriticValue(critic),
+        use_terminal_value=value == "gail_critic",
+        **planner_kwargs,
+    )
+    policy.temperature.fill_(float(hyperparams.get("temperature", 1.0)))
+    policy.seed(0)
+    return policy.eval()
+
+
+def train_adversarial(
+    algo: str,
+    env_id: str,
+    demos: Path | str,
+    timesteps: int,
+    seed: int,
+    n_envs: int,
+    hyperparams: Dict[str, Any],
+    eval_every: int = 0,
+    on_eval: Optional[EvalHook] = None,
+    irl_mpc_hyperparams: Optional[Dict[str, Any]] = None,
+) -> Tuple[AdversarialTrainer, Callable[[], Dict[str, Any]]]:
+    """
+    Trains GAIL or AIRL (obs-only) for ``timesteps`` env steps in whole rounds of PPO's ``n_steps * n_envs``.
+
+    :param algo: ``gail`` or ``airl``
+    :param env_id: gymnasium id
+    :param demos: observation-only demos
+    :param timesteps: env-step budget
+    :param seed: envs' and PPO's seed
+    :param n_envs: parallel training envs
+    :param hyperparams: the config entry without :data:`META_KEYS`
+    :param eval_every: env steps between ``on_eval`` calls (also called at the end)
+    :param on_eval: the evaluation hook
+    :param irl_mpc_hyperparams: (GAIL only) also hand ``on_eval`` the IRL-MPC policy built from the GAIL of that moment
+    :return: the trainer and a function giving the predictors ``{algo: ...}`` (and ``irl_mpc``) of its current state
+    """
+    if irl_mpc_hyperparams is not None and algo != "gail":
+        raise ValueError("IRL-MPC deploys GAIL's reward.")
+    trainer = make_adversarial(algo, make_vec_env(env_id, n_envs=n_envs, seed=seed), demos, seed, hyperparams)
+
+    def predictors() -> Dict[str, Any]:
+        found = {algo: trainer.gen_algo}
+        if irl_mpc_hyperparams is not None:
+            found["irl_mpc"] = irl_mpc_policy(trainer, env_id, irl_mpc_hyperparams)
+        return found
+
+    schedule = _EvalSchedule(eval_every, on_eval)
+    for _ in range(max(1, timesteps // trainer.gen_train_timesteps)):
+        trainer.train_gen(trainer.gen_train_timesteps)
+        with networks.training(trainer.reward_train):
+            for _ in range(trainer.n_disc_updates_per_round):
+                trainer.train_disc()
+        schedule(trainer.gen_algo.num_timesteps, predictors)
+    schedule(trainer.gen_algo.num_timesteps, predictors, force=True)
+    return trainer, predictors
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# BC and MPAIL
+
+
+def train_bc(env_id: str, demos: Path | str, seed: int, hyperparams: Dict[str, Any]) -> imitation_bc.BC:
+    """
+    imitation's BC on the action-labelled twin of ``demos`` (it **uses expert actions**, and no env steps).
+
+    :param env_id: gymnasium id
+    :param demos: the observation-only demo file (its ``_actions`` twin is read)
+    :param seed: network and minibatch seed
+    :param hyperparams: ``policy_kwargs``, ``learning_rate``, ``batch_size``, ``n_epochs``, ``ent_weight``,
+        ``l2_weight``
+    """
+    env = gym.make(env_id)
+    th.manual_seed(seed)
+    transitions = action_transitions(demos)
+    learning_rate = float(hyperparams.get("learning_rate", 1e-3))
+    policy = ActorCriticPolicy(env.observation_space, env.action_space, lr_schedule=lambda _: learning_rate,
+                               **(hyperparams.get("policy_kwargs") or {}))  # fmt: skip
+    trainer = imitation_bc.BC(
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+        rng=np.random.default_rng(seed),
+        policy=policy,
+        demonstrations=transitions,
+        batch_size=min(int(hyperparams.get("batch_size", 64)), len(transitions)),
+        optimizer_kwargs=dict(lr=learning_rate),
+        ent_weight=float(hyperparams.get("ent_weight", 1e-3)),
+        l2_weight=float(hyperparams.get("l2_weight", 0.0)),
+        device="cpu",
+        custom_logger=_quiet_logger(),
+    )
+    trainer.train(n_epochs=int(hyperparams.get("n_epochs", 100)), progress_bar=False, log_interval=10**9)
+    return trainer
+
+
+class _RolloutEvalCallback(BaseCallback):
+    def __init__(self, schedule: _EvalSchedule):
+        super().__init__()
+        self.schedule = schedule
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        self.schedule(self.num_timesteps, lambda: {"mpail": self.model})
+
+
+def train_mpail(
+    env_id: str,
+    demos: Path | str,
+    timesteps: int,
+    seed: int,
+    n_envs: int,
+    hyperparams: Dict[str, Any],
+    eval_every: int = 0,
+    on_eval: Optional[EvalHook] = None,
+) -> Any:
+    """
+    :class:`~sb3_mpail.MPAIL` with ``mpail.yml``'s settings, evaluated at the end of rollouts.
+
+    :param env_id: gymnasium id
+    :param demos: observation-only demos
+    :param timesteps: env-step budget
+    :param seed: training seed
+    :param n_envs: parallel training envs
+    :param hyperparams: the config entry without :data:`META_KEYS`
+    :param eval_every: env steps between ``on_eval`` calls (also called at the end)
+    :param on_eval: the evaluation hook
+    """
+    from sb3_mpail.mpail import MPAIL
+
+    settings = dict(hyperparams)
+    model = MPAIL(settings.pop("policy", "MlpMPPI"), make_vec_env(env_id, n_envs=n_envs, seed=seed), str(demos), seed=seed,
+                  device="cpu", **settings)  # fmt: skip
+    schedule = _EvalSchedule(eval_every, on_eval)
+    model.learn(timesteps, callback=_RolloutEvalCallback(schedule))
+    schedule(model.num_timesteps, lambda: {"mpail": model}, force=True)
+    return model
+
+
+def train_baseline(
+    algo: str,
+    env_id: str,
+    demos: Path | str,
+    seed: int,
+    hyperparams: Dict[str, Any],
+    eval_every: int = 0,
+    on_eval: Optional[EvalHook] = None,
+    timesteps: Optional[int] = None,
+) -> Any:
+    """
+    Trains one algorithm of the grid and returns what plans or acts (an SB3 algorithm or policy).
+
+    :param algo: one of :data:`ALGOS`
+    :param env_id: gymnasium id or short name
+    :param demos: ``demos/<env>_<n>.npz`` (BC reads its ``_actions`` twin)
+    :param seed: training seed (envs, networks, planner noise)
+    :param hyperparams: :func:`load_config`'s entry (``n_timesteps`` and ``n_envs`` are the budget)
+    :param eval_every: env steps between ``on_eval`` calls; BC, which has no env steps, is evaluated once at step 0
+    :param on_eval: ``on_eval(env_steps, {algo: predictor})``; IRL-MPC's run also hands over its GAIL generator
+    :param timesteps: overrides ``n_timesteps`` (tests)
+    """
+    env_id = env_id_of(env_id)
+    timesteps = int(hyperparams["n_timesteps"] if timesteps is None else timesteps)
+    n_envs = int(hyperparams.get("n_envs", 1))
+    hp = {key: value for key, value in hyperparams.items() if key not in META_KEYS}
+    if algo in ("gail", "airl"):
+        return train_adversarial(algo, env_id, demos, timesteps, seed, n_envs, hp, eval_every, on_eval)[0].gen_algo
+    if algo == "irl_mpc":
+        gail_hp = {key: value for key, value in hp["gail"].items() if key not in META_KEYS}
+        predictors = train_adversarial("gail", env_id, demos, timesteps, seed, n_envs, gail_hp, eval_every, on_eval, hp)[1]
+        return predictors()["irl_mpc"]
+    if algo == "bc":
+        policy = train_bc(env_id, demos, seed, hp).policy
+        if on_eval is not None:
+            on_eval(0, {"bc": policy})
+        return policy
+    if algo == "mpail":
+        return train_mpail(env_id, demos, timesteps, seed, n_envs, hp, eval_every, on_eval)
+    raise ValueError(f"Unknown algorithm {algo!r}; expected one of {ALGOS}.")
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# action-labelled demos for BC
+
+
+def _demo_script(name: str) -> Any:
+    """The module ``demos/<name>.py`` (the scripts that made the shipped demos)."""
+    spec = importlib.util.spec_from_file_location(name, DEMO_DIR / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    return script
+
+
+def _replay(env: gym.Env, act: Callable[[np.ndarray], np.ndarray], seed: int, steps: int) -> Tuple[np.ndarray, np.ndarray]:
+    """One episode of ``steps`` from ``reset(seed=seed)``: observations ``(steps + 1, d)`` and the actions taken."""
+    obs, _ = env.reset(seed=seed)
+    observations, actions = [obs], []
+    for _ in range(steps):
+        actions.append(np.asarray(act(obs), np.float32))
+        obs = env.step(actions[-1])[0]
+        observations.append(obs)
+    return np.asarray(observations, np.float32), np.asarray(actions, np.float32)
+
+
+def pendulum_actions(observations: np.ndarray, gravity: float = 10.0) -> np.ndarray:
+    """
+    The torques that produced a pendulum episode, recovered exactly from consecutive observations by inverting
+    ``Pendulum-v1``'s dynamics: ``thdot' = thdot + (3 g / (2 l) sin(th) + 3 u / (m l^2)) dt``.
+
+    :param observations: ``(T + 1, 3)`` observations ``(cos th, sin th, thdot)``
+    :param gravity: the environment's ``g``
+    :return: ``(T, 1)`` torques
+    """
+    p = PendulumDynamics
+    obs = np.asarray(observations, np.float64)
+    acceleration = (obs[1:, 2] - obs[:-1, 2]) / p.dt - 3 * gravity / (2 * p.length) * obs[:-1, 1]
+    return (acceleration * p.mass * p.length**2 / 3).astype(np.float32)[:, None]
+
+
+def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Path = DEMO_DIR) -> List[Path]:
+    """
+    Writes ``<env>_<n>_actions.npz`` (``obs`` and the expert's ``acts``) beside each shipped ``<env>_<n>.npz``, after
+    checking that the actions reproduce the shipped observations.
+
+    Navigation: replays the PPO expert that ``demos/make_navigation_demos.py`` saved (``expert_path``; rerunning that
+    script retrains the same expert bit for bit on this stack) from the demos' start seeds. Pendulum: the torques are
+    recovered from the shipped observations by inverting the pendulum's known dynamics (:func:`pendulum_actions`),
+    so no expert is needed; every step is checked against the exact model.
+
+    :param env: ``navigation`` or ``pendulum``
+    :param expert_path: the navigation expert
+    :param out_dir: folder of the shipped demos, where the files go
+    :raises RuntimeError: the actions do not reproduce a shipped demo
+    """
+    env_id = env_id_of(env)
+    name = env_name_of(env_id)
+    gym_env = gym.make(env_id)
+    shipped = sorted(Path(out_dir).glob(f"{name}_*[0-9].npz"), key=lambda p: int(p.stem.split("_")[-1]))
+    if not shipped:
+        raise FileNotFoundError(f"No {name}_<n>.npz demos in {out_dir}.")
+    demos = np.load(shipped[-1])["obs"]
+    if name == "navigation":
+        script = _demo_script("make_navigation_demos")
+        expert = script.make_expert_policy(PPO.load(expert_path or "/tmp/navigation_expert_ppo.zip", device="cpu"), gym_env)
+        replays = [_replay(gym_env, expert, script.DEMO_SEED_BASE + i, demos.shape[1] - 1) for i in range(len(demos))]
+        reproduced, actions = np.stack([obs for obs, _ in replays]), np.stack([acts for _, acts in replays])
+    elif name == "pendulum":
+        # the pendulum is unstable upright, so float32 torques replayed open loop drift: check each step instead
+        actions = np.stack([pendulum_actions(observations) for observations in demos])
+        states, torques = th.as_tensor(demos[:, :-1]).reshape(-1, 3), th.as_tensor(actions).reshape(-1, 1)
+        next_states = PendulumDynamics()(states, torques).reshape(demos[:, 1:].shape).numpy()
+        reproduced = np.concatenate([demos[:, :1], next_states], axis=1)
+    else:
+        raise ValueError(f"No action labels known for {env!r}.")
+    if not np.allclose(reproduced, demos, atol=1e-4):
+        raise RuntimeError(f"The actions do not reproduce {shipped[-1]} (max error {np.abs(reproduced - demos).max()}).")
+    written = []
+    for path in shipped:
+        n = int(path.stem.split("_")[-1])
+        written.append(action_demos_path(path))
+        np.savez_compressed(written[-1], obs=demos[:n], acts=actions[:n])
+    return written
+
+
+def main(argv: Optional[Sequence[str]] = None) -> None:
+    """
+    ``make-action-demos``: the action-labelled demos for BC.
+
+    :param argv: command-line arguments
+    """
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    commands = parser.add_subparsers(dest="command", required=True)
+    make = commands.add_parser("make-action-demos", help="write demos/<env>_<n>_actions.npz for BC")
+    make.add_argument("--env", required=True, choices=sorted(ENV_NAMES.values()))
+    make.add_argument("--expert", type=Path, default=None, help="navigation: the saved PPO expert")
+    make.add_argument("--out-dir", type=Path, default=DEMO_DIR)
+    args = parser.parse_args(argv)
+    for path in make_action_demos(args.env, args.expert, args.out_dir):
+        print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

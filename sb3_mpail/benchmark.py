@@ -1,0 +1,460 @@
+"""
+The benchmark grid: MPAIL against GAIL, AIRL (obs-only), BC (uses expert actions) and IRL-MPC, on the same demos and
+env-step budget (``zoo_configs/<algo>.yml``), over envs x demo counts x seeds.
+
+    python -m sb3_mpail.benchmark --envs navigation pendulum --algos mpail gail airl bc irl_mpc --demos 1 4 16 --seeds 5
+
+Each finished run writes ``<results-dir>/<env>/<algo>_<n>demos_seed<s>.json`` (its learning curve, final score and,
+on navigation, its out-of-distribution episodes); a rerun skips the runs whose file exists, so an interrupted grid
+resumes where it stopped. GAIL and IRL-MPC of the same env, demo count and seed come from one GAIL training run (IRL-MPC
+deploys that run's reward and critic). Runs go to ``--workers`` local processes, or to a Ray cluster with
+``--ray-address`` (``pip install ray``). At the end, the tables of every result found go into BENCHMARKS.md
+(normalised score mean and 95% CI, env steps to reach 0.9) and the figures into ``benchmarks/figures/``.
+"""
+
+import argparse
+import json
+import math
+import multiprocessing
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import torch as th
+
+from benchmarks.report import BENCHMARKS_FILE, machine_description, write_section
+from sb3_mpail.baselines import (
+    ALGO_LABELS,
+    ALGOS,
+    CONFIG_DIR,
+    DEMO_DIR,
+    env_id_of,
+    env_name_of,
+    evaluate,
+    expert_stats,
+    load_config,
+    normalised_score,
+    train_baseline,
+)
+from sb3_mpail.envs.navigation import REWARD_OFFSET
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+RESULTS_DIR = REPO_ROOT / "benchmarks" / "results"
+FIGURES_DIR = REPO_ROOT / "benchmarks" / "figures"
+TARGET = 0.9
+#: learning-curve episodes start from ``reset(seed=EVAL_SEED + i)``, the OOD ones from ``OOD_SEED + i``; both
+#: ranges are disjoint from the demos' start seeds
+EVAL_SEED, OOD_SEED = 10_000, 50_000
+#: an OOD episode "reaches the goal" when it ends within this distance of it (metres)
+GOAL_RADIUS = 2.0
+NAVIGATION = "sb3_mpail/Navigation-v0"
+
+
+def result_path(results_dir: Path, env_id: str, algo: str, n_demos: int, seed: int) -> Path:
+    """
+    Where a run's result goes.
+
+    :param results_dir: the grid's folder
+    :param env_id: gymnasium id
+    :param algo: one of :data:`~sb3_mpail.baselines.ALGOS`
+    :param n_demos: demo count
+    :param seed: training seed
+    """
+    return Path(results_dir) / env_name_of(env_id) / f"{algo}_{n_demos}demos_seed{seed}.json"
+
+
+def make_jobs(envs: Sequence[str], algos: Sequence[str], demos: Sequence[int], seeds: Sequence[int]) -> List[Dict[str, Any]]:
+    """
+    The grid's training runs, seed by seed; GAIL and IRL-MPC share one run (``algos`` lists what a job reports).
+
+    :param envs: env ids or short names
+    :param algos: algorithms
+    :param demos: demo counts
+    :param seeds: training seeds
+    """
+    shared = tuple(algo for algo in ("gail", "irl_mpc") if algo in algos)
+    groups = [(algo,) for algo in ALGOS if algo in algos and algo not in shared] + ([shared] if shared else [])
+    return [
+        dict(env_id=env_id_of(env), algos=group, n_demos=n_demos, seed=seed)
+        for env in envs
+        for n_demos in demos
+        for seed in seeds
+        for group in groups
+    ]
+
+
+def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
+    """
+    Trains one job and writes each of its algorithms' result file; skips it when all exist.
+
+    :param job: an entry of :func:`make_jobs`
+    :param options: ``results_dir``, ``config_dir``, ``eval_episodes``, ``ood_episodes``, ``eval_every`` (0: a tenth of
+        the budget), ``timesteps`` (``None``: the configs'), ``threads``
+    :return: the result files written
+    """
+    env_id, algos, n_demos, seed = job["env_id"], job["algos"], job["n_demos"], job["seed"]
+    paths = {algo: result_path(options["results_dir"], env_id, algo, n_demos, seed) for algo in algos}
+    if all(path.exists() for path in paths.values()):
+        return []
+    th.set_num_threads(options["threads"])
+    algo = "irl_mpc" if "irl_mpc" in algos else algos[0]
+    hyperparams = load_config(algo, env_id, options["config_dir"])
+    budget = hyperparams["n_timesteps"] if options["timesteps"] is None else options["timesteps"]
+    eval_every = options["eval_every"] or max(1, budget // 10)
+    stats = expert_stats(env_id)
+    curves: Dict[str, List[Tuple[int, float, float]]] = {name: [] for name in algos}
+    finals: Dict[str, Any] = {}
+
+    def on_eval(steps: int, predictors: Dict[str, Any]) -> None:
+        for name, predictor in predictors.items():
+            if name in curves:
+                mean_return = float(np.mean([np.sum(t.rews) for t in evaluate(predictor, env_id, options["eval_episodes"],
+                                                                               EVAL_SEED)]))  # fmt: skip
+                curves[name].append((steps, normalised_score(mean_return, stats), mean_return))
+                finals[name] = predictor
+
+    start = time.perf_counter()
+    train_baseline(algo, env_id, DEMO_DIR / f"{env_name_of(env_id)}_{n_demos}.npz", seed, hyperparams, eval_every, on_eval,
+                   budget)  # fmt: skip
+    seconds = time.perf_counter() - start
+    for name, path in paths.items():
+        result: Dict[str, Any] = dict(
+            env_id=env_id, algo=name, n_demos=n_demos, seed=seed, n_timesteps=budget, curve=curves[name],
+            final_score=curves[name][-1][1], final_return=curves[name][-1][2],
+            steps_to_target=next((steps for steps, score, _ in curves[name] if score >= TARGET), None),
+            train_seconds=round(seconds, 1), shared_run=list(algos),
+        )  # fmt: skip
+        if env_id == NAVIGATION and options["ood_episodes"] > 0:
+            trajectories = evaluate(finals[name], env_id, options["ood_episodes"], OOD_SEED, dict(start_region="ood"))
+            final_rewards = np.array([t.rews[-1] for t in trajectories])
+            result["ood"] = dict(
+                final_positions=[[float(t.obs[-1][0]), float(t.obs[-1][1])] for t in trajectories],
+                final_rewards=final_rewards.tolist(),
+                reached=float(np.mean(REWARD_OFFSET - final_rewards <= GOAL_RADIUS)),
+                mean_final_reward=float(final_rewards.mean()),
+            )
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial = path.with_name(path.name + ".partial")
+        partial.write_text(json.dumps(result))
+        partial.replace(path)
+    return [str(path) for path in paths.values()]
+
+
+def run_grid(jobs: List[Dict[str, Any]], options: Dict[str, Any], workers: int = 1, ray_address: Optional[str] = None) -> None:
+    """
+    Runs the jobs one after another, in ``workers`` local processes, or as Ray tasks on the cluster at ``ray_address``.
+
+    :param jobs: :func:`make_jobs`'s entries
+    :param options: :func:`run_job`'s options
+    :param workers: local processes
+    :param ray_address: a Ray cluster's address (``auto`` for the local one)
+    """
+    jobs = [job for job in jobs if not all(result_path(options["results_dir"], job["env_id"], algo, job["n_demos"],
+                                                       job["seed"]).exists() for algo in job["algos"])]  # fmt: skip
+    print(f"{len(jobs)} runs to do", flush=True)
+    if ray_address is not None:
+        try:
+            import ray
+        except ImportError as error:
+            raise SystemExit("--ray-address needs Ray, which is not installed: pip install 'ray[default]'.") from error
+        ray.init(address=ray_address)
+        remote = ray.remote(num_cpus=options["threads"])(run_job)
+        for paths in ray.get([remote.remote(job, options) for job in jobs]):
+            print("wrote", *paths, flush=True)
+    elif workers > 1:
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            for paths in pool.map(run_job, jobs, [options] * len(jobs)):
+                print("wrote", *paths, flush=True)
+    else:
+        for job in jobs:
+            print("wrote", *run_job(job, options), flush=True)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# tables and figures
+
+
+def load_results(results_dir: Path) -> List[Dict[str, Any]]:
+    """
+    Every result file under ``results_dir``.
+
+    :param results_dir: the grid's folder
+    """
+    return [json.loads(path.read_text()) for path in sorted(Path(results_dir).glob("*/*.json"))]
+
+
+def mean_ci(values: Sequence[float]) -> Tuple[float, float]:
+    """
+    The mean and the half-width of its 95% confidence interval (Student's t; NaN for fewer than two values).
+
+    :param values: one value per seed
+    """
+    from scipy import stats
+
+    values = np.asarray(values, dtype=float)
+    if len(values) < 2:
+        return float(values.mean()), math.nan
+    return float(values.mean()), float(stats.t.ppf(0.975, len(values) - 1) * values.std(ddof=1) / math.sqrt(len(values)))
+
+
+def _format(mean: float, half_width: float, digits: int = 2) -> str:
+    return f"{mean:.{digits}f}" + ("" if math.isnan(half_width) else f" ± {half_width:.{digits}f}")
+
+
+def steps_summary(runs: Sequence[Dict[str, Any]]) -> str:
+    """
+    Env steps to reach a normalised score of 0.9: the median over the seeds that reached it, and how many did.
+
+    :param runs: results of one algorithm, env and demo count
+    """
+    reached = [run["steps_to_target"] for run in runs if run["steps_to_target"] is not None]
+    if not reached:
+        return f"not reached (0/{len(runs)})"
+    return f"{int(np.median(reached))} ({len(reached)}/{len(runs)})"
+
+
+def grid_table(results: List[Dict[str, Any]], env_id: str, algos: Sequence[str], demos: Sequence[int], n_seeds: int) -> str:
+    """
+    The markdown table of one env: per algorithm and demo count, seeds done, final normalised score mean and 95% CI,
+    env steps to 0.9.
+
+    :param results: :func:`load_results`
+    :param env_id: gymnasium id
+    :param algos: rows
+    :param demos: demo counts
+    :param n_seeds: seeds asked for (cells with fewer are marked incomplete)
+    """
+    lines = ["| algorithm | demos | seeds | normalised score (mean ± 95% CI) | env steps to 0.9: median (seeds reached) |",
+             "|---|---|---|---|---|"]  # fmt: skip
+    for algo in algos:
+        for n_demos in demos:
+            runs = [r for r in results if r["env_id"] == env_id and r["algo"] == algo and r["n_demos"] == n_demos]
+            done = f"{len(runs)}/{n_seeds}" + ("" if len(runs) >= n_seeds else " **incomplete**")
+            if not runs:
+                lines.append(f"| {ALGO_LABELS[algo]} | {n_demos} | {done} | not run | not run |")
+                continue
+            score = _format(*mean_ci([run["final_score"] for run in runs]))
+            lines.append(f"| {ALGO_LABELS[algo]} | {n_demos} | {done} | {score} | {steps_summary(runs)} |")
+    return "\n".join(lines)
+
+
+def ood_table(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int) -> str:
+    """
+    The navigation OOD table: per algorithm, the fraction of episodes ending within 2 m of the goal and the mean final
+    reward (means over seeds, 95% CI).
+
+    :param results: :func:`load_results`
+    :param algos: rows
+    :param n_demos: demo count
+    """
+    lines = ["| algorithm | seeds | ends within 2 m of goal | mean final reward |", "|---|---|---|---|"]
+    for algo in algos:
+        runs = [
+            r for r in results if r["env_id"] == NAVIGATION and r["algo"] == algo and r["n_demos"] == n_demos and "ood" in r
+        ]
+        if runs:
+            reached = _format(*mean_ci([run["ood"]["reached"] for run in runs]))
+            reward = _format(*mean_ci([run["ood"]["mean_final_reward"] for run in runs]))
+            lines.append(f"| {ALGO_LABELS[algo]} | {len(runs)} | {reached} | {reward} |")
+        else:
+            lines.append(f"| {ALGO_LABELS[algo]} | 0 | not run | not run |")
+    return "\n".join(lines)
+
+
+def plot_curves(results: List[Dict[str, Any]], env_id: str, n_demos: int, path: Path) -> Optional[Path]:
+    """
+    Normalised score against env steps per algorithm: the mean over seeds and a band of ± one standard deviation
+    (BC, which takes no env steps, as a dashed line at its final score).
+
+    :param results: :func:`load_results`
+    :param env_id: gymnasium id
+    :param n_demos: demo count
+    :param path: the PNG to write
+    :return: the path, or ``None`` when there is nothing to plot
+    """
+    from sb3_mpail.plotting import import_pyplot
+
+    runs = [r for r in results if r["env_id"] == env_id and r["n_demos"] == n_demos]
+    if not runs:
+        return None
+    plt = import_pyplot()
+    figure, axis = plt.subplots(figsize=(8, 5), constrained_layout=True)
+    budget = max(r["n_timesteps"] for r in runs)
+    for index, algo in enumerate(ALGOS):
+        curves = [np.asarray(r["curve"], dtype=float) for r in runs if r["algo"] == algo]
+        if not curves:
+            continue
+        color, label = f"C{index}", f"{ALGO_LABELS[algo]} ({len(curves)} seeds)"
+        if algo == "bc":
+            axis.axhline(np.mean([c[-1, 1] for c in curves]), color=color, ls="--", label=label)
+            continue
+        steps = curves[0][:, 0]
+        scores = np.stack([np.interp(steps, c[:, 0], c[:, 1]) for c in curves])
+        mean, spread = scores.mean(0), scores.std(0)
+        axis.plot(steps, mean, color=color, lw=2, label=label)
+        axis.fill_between(steps, mean - spread, mean + spread, color=color, alpha=0.2)
+    axis.axhline(TARGET, color="r", ls=":", lw=1, label=f"target {TARGET}")
+    axis.set_xlim(0, max(budget, 1))
+    axis.set_xlabel("env steps")
+    axis.set_ylabel("normalised score (mean ± std over seeds)")
+    axis.set_title(f"{env_id}, {n_demos} demos")
+    axis.grid(alpha=0.3)
+    axis.legend(loc="best", fontsize=8)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+    return path
+
+
+def plot_ood(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int, path: Path) -> Optional[Path]:
+    """
+    Final positions of the navigation OOD episodes (starts uniform in the 40 x 40 m box), one panel per algorithm,
+    every seed pooled, coloured by the final reward; the goal and its 2 m circle.
+
+    :param results: :func:`load_results`
+    :param algos: panels
+    :param n_demos: demo count
+    :param path: the PNG to write
+    :return: the path, or ``None`` when there is nothing to plot
+    """
+    from sb3_mpail.plotting import import_pyplot
+
+    panels = [(a, [r for r in results if r["env_id"] == NAVIGATION and r["algo"] == a and r["n_demos"] == n_demos
+                   and "ood" in r]) for a in algos]  # fmt: skip
+    panels = [(algo, runs) for algo, runs in panels if runs]
+    if not panels:
+        return None
+    plt = import_pyplot()
+    figure, axes = plt.subplots(1, len(panels), figsize=(4 * len(panels), 4.3), constrained_layout=True, squeeze=False)
+    for axis, (algo, runs) in zip(axes[0], panels):
+        positions = np.concatenate([np.asarray(r["ood"]["final_positions"]) for r in runs])
+        rewards = np.concatenate([np.asarray(r["ood"]["final_rewards"]) for r in runs])
+        points = axis.scatter(positions[:, 0], positions[:, 1], c=rewards, s=8, cmap="viridis", vmin=-20, vmax=REWARD_OFFSET)
+        axis.add_patch(plt.Rectangle((-20, -20), 40, 40, fill=False, ls="--", color="0.5"))
+        axis.add_patch(plt.Circle((10, 10), GOAL_RADIUS, fill=False, color="r"))
+        axis.plot(10, 10, "r*", ms=12)
+        axis.set(xlim=(-30, 30), ylim=(-30, 30), aspect="equal", title=f"{ALGO_LABELS[algo]}\n{len(runs)} seeds")
+    figure.colorbar(points, ax=axes[0].tolist(), label="final reward")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+    return path
+
+
+def write_report(
+    results: List[Dict[str, Any]],
+    envs: Sequence[str],
+    algos: Sequence[str],
+    demos: Sequence[int],
+    n_seeds: int,
+    command: str,
+    report_file: Path = BENCHMARKS_FILE,
+    figures_dir: Path = FIGURES_DIR,
+    config_dir: Path = CONFIG_DIR,
+) -> None:
+    """
+    Writes one BENCHMARKS.md section per env (``baselines-<env>``; navigation also ``baselines-navigation-ood``) and
+    the figures.
+
+    :param results: :func:`load_results`
+    :param envs: env ids or short names
+    :param algos: table rows
+    :param demos: demo counts
+    :param n_seeds: seeds asked for
+    :param command: the command line to quote
+    :param report_file: the markdown file
+    :param figures_dir: folder of the figures
+    :param config_dir: folder of the configs (for the budgets quoted)
+    """
+    for env in envs:
+        env_id, name = env_id_of(env), env_name_of(env_id_of(env))
+        stats = expert_stats(env_id)
+        budgets = {algo: load_config(algo, env_id, config_dir)["n_timesteps"] for algo in algos}
+        figures = [plot_curves(results, env_id, n, figures_dir / f"baselines_{name}_{n}demos.png") for n in demos]
+        lines = [
+            f"## Baselines on {env_id}",
+            "",
+            f"Normalised score = (R - random) / (expert - random), random {stats['random_return_mean']:.1f}, expert "
+            f"{stats['expert_return_mean']:.1f} ({stats['expert_algo']}); final deterministic evaluation on "
+            f"episodes from fixed seeds; mean ± 95% CI (Student's t) over seeds. Env-step budgets (zoo_configs): "
+            + ", ".join(f"{ALGO_LABELS[a]} {budgets[a]}" for a in algos)
+            + ". BC uses the expert's actions and no env steps; IRL-MPC's env steps are its GAIL run's. Learning curves "
+            "are evaluated about every tenth of the budget, so env steps to 0.9 are resolved to that grid.",
+            "",
+            grid_table(results, env_id, algos, demos, n_seeds),
+            "",
+        ]
+        for n_demos in demos:
+            mpail, gail = ([r for r in results if r["env_id"] == env_id and r["algo"] == a and r["n_demos"] == n_demos]
+                           for a in ("mpail", "gail"))  # fmt: skip
+            if mpail and gail:
+                lines.append(f"MPAIL vs GAIL, {n_demos} demos, env steps to 0.9: MPAIL {steps_summary(mpail)}, "
+                             f"GAIL {steps_summary(gail)}.")  # fmt: skip
+        lines += [""] + [f"![{env_id}](benchmarks/figures/{figure.name})" for figure in figures if figure is not None]
+        lines += ["", f"Command: `{command}` on {machine_description()}."]
+        write_section(f"baselines-{name}", "\n".join(lines), report_file)
+        if env_id == NAVIGATION:
+            n_ood = 4 if 4 in demos else demos[0]
+            figure = plot_ood(results, algos, n_ood, figures_dir / "baselines_navigation_ood.png")
+            ood = [
+                "## Navigation out of distribution",
+                "",
+                f"Agents trained on {n_ood} demos (starts within 1 m of the origin), run deterministically for 100 steps "
+                "from starts uniform in the 40 x 40 m box centred at the origin with uniform heading (env option "
+                f"`start_region='ood'`, seeds {OOD_SEED}+). Goal reached = the episode ends within {GOAL_RADIUS:.0f} m "
+                "of (10, 10); final reward = sqrt(200) - final distance. Means ± 95% CI over seeds.",
+                "",
+                ood_table(results, algos, n_ood),
+                "",
+            ]
+            if figure is not None:
+                ood.append(f"![final positions](benchmarks/figures/{figure.name})")
+            ood += ["", f"Command: `{command}`."]
+            write_section("baselines-navigation-ood", "\n".join(ood), report_file)
+
+
+def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--envs", nargs="+", default=["navigation", "pendulum"], help="env ids or short names")
+    parser.add_argument("--algos", nargs="+", default=list(ALGOS), choices=ALGOS)
+    parser.add_argument("--demos", nargs="+", type=int, default=[4], help="demo counts (demos/<env>_<n>.npz)")
+    parser.add_argument("--seeds", type=int, default=5, help="seeds 0 .. n-1")
+    parser.add_argument("--workers", type=int, default=1, help="local processes")
+    parser.add_argument("--ray-address", default=None, help="run on this Ray cluster instead ('auto': the local one)")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads per run")
+    parser.add_argument("--eval-episodes", type=int, default=10, help="episodes per learning-curve point")
+    parser.add_argument("--eval-every", type=int, default=0, help="env steps between curve points (0: a tenth of the budget)")
+    parser.add_argument("--ood-episodes", type=int, default=100, help="navigation OOD episodes per run (0: none)")
+    parser.add_argument("--timesteps", type=int, default=None, help="override every budget (smoke tests)")
+    parser.add_argument("--config-dir", type=Path, default=CONFIG_DIR)
+    parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR)
+    parser.add_argument("--report-file", type=Path, default=BENCHMARKS_FILE)
+    parser.add_argument("--figures-dir", type=Path, default=FIGURES_DIR)
+    parser.add_argument("--report-only", action="store_true", help="only write the tables and figures of existing results")
+    return parser.parse_args(argv)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> None:
+    """
+    Runs the grid (skipping finished runs) and writes the report.
+
+    :param argv: command-line arguments
+    """
+    args = parse_args(argv)
+    options = dict(results_dir=args.results_dir, config_dir=args.config_dir, eval_episodes=args.eval_episodes,
+                   eval_every=args.eval_every, ood_episodes=args.ood_episodes, timesteps=args.timesteps,
+                   threads=args.threads)  # fmt: skip
+    if not args.report_only:
+        run_grid(make_jobs(args.envs, args.algos, args.demos, range(args.seeds)), options, args.workers, args.ray_address)
+    command = "python -m sb3_mpail.benchmark " + " ".join(
+        [f"--envs {' '.join(args.envs)}", f"--algos {' '.join(args.algos)}", f"--demos {' '.join(map(str, args.demos))}",
+         f"--seeds {args.seeds}"]
+    )  # fmt: skip
+    write_report(load_results(args.results_dir), args.envs, args.algos, args.demos, args.seeds, command, args.report_file,
+                 args.figures_dir, args.config_dir)  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,130 @@
+"""The baselines of the benchmark grid: configs, demos for them, and one tiny training round each."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch as th
+import yaml
+
+from sb3_mpail.baselines import (
+    ALGOS,
+    CONFIG_DIR,
+    DEMO_DIR,
+    action_transitions,
+    evaluate,
+    load_config,
+    make_action_demos,
+    observation_only_transitions,
+    pendulum_actions,
+    train_baseline,
+)
+from sb3_mpail.mppi.dynamics import PendulumDynamics
+
+ENVS = ("Pendulum-v1", "sb3_mpail/Navigation-v0")
+#: per algorithm, overrides that shrink a real config entry to one round of a few dozen env steps
+TINY = {
+    "mpail": dict(n_envs=2, n_steps=16, policy_kwargs="dict(n_samples=16, horizon=3, n_iterations=1)"),
+    "gail": dict(n_envs=2, n_steps=16, batch_size=32, n_epochs=1, n_timesteps=64),
+    "airl": dict(n_envs=2, n_steps=16, batch_size=32, n_epochs=1, n_timesteps=64),
+    "bc": dict(n_epochs=1),
+    "irl_mpc": dict(n_envs=2, n_timesteps=64, policy_kwargs="dict(n_samples=16, horizon=3, n_iterations=1)"),
+}
+
+
+def tiny_configs(directory: Path) -> Path:
+    """zoo_configs/ with every entry shrunk by :data:`TINY`."""
+    directory.mkdir(parents=True, exist_ok=True)
+    for algo in ALGOS:
+        entries = yaml.safe_load((CONFIG_DIR / f"{algo}.yml").read_text())
+        for entry in entries.values():
+            entry.update(TINY[algo])
+        (directory / f"{algo}.yml").write_text(yaml.safe_dump(entries))
+    return directory
+
+
+@pytest.mark.parametrize("algo", ALGOS)
+@pytest.mark.parametrize("env_id", ENVS)
+def test_every_config_has_the_zoo_keys_and_mpail_s_budget(algo, env_id):
+    entry = load_config(algo, env_id)
+    assert {"n_timesteps", "n_envs", "policy", "policy_kwargs", "demos"} <= set(entry)
+    assert isinstance(entry["policy_kwargs"], dict)  # a string in the file, evaluated as rl_zoo3 does
+    assert (CONFIG_DIR.parent / entry["demos"]).exists()
+    mpail = load_config("mpail", env_id)
+    if algo != "bc":  # BC takes no env steps
+        assert entry["n_timesteps"] == mpail["n_timesteps"] and entry["demos"] == mpail["demos"]
+
+
+def test_irl_mpc_config_carries_and_checks_its_gail_run(tmp_path):
+    entry = load_config("irl_mpc", "Pendulum-v1")
+    assert entry["gail"] == load_config("gail", "Pendulum-v1")
+    configs = tiny_configs(tmp_path)
+    irl_mpc = yaml.safe_load((configs / "irl_mpc.yml").read_text())
+    irl_mpc["Pendulum-v1"]["n_timesteps"] = 999
+    (configs / "irl_mpc.yml").write_text(yaml.safe_dump(irl_mpc))
+    with pytest.raises(ValueError, match="n_timesteps"):
+        load_config("irl_mpc", "Pendulum-v1", configs)
+    with pytest.raises(ValueError, match="no entry"):
+        load_config("gail", "CartPole-v1")
+
+
+def test_pendulum_actions_invert_the_exact_dynamics():
+    generator = th.Generator().manual_seed(0)
+    angles, speeds = th.rand(50, generator=generator) * 6 - 3, th.rand(50, generator=generator) * 4 - 2
+    states = th.stack([th.cos(angles), th.sin(angles), speeds], 1)
+    torques = th.rand(50, 1, generator=generator) * 4 - 2
+    next_states = PendulumDynamics()(states, torques)
+    recovered = np.concatenate([pendulum_actions(np.stack([s, n])) for s, n in zip(states.numpy(), next_states.numpy())])
+    np.testing.assert_allclose(recovered, torques.numpy(), atol=1e-4)
+
+
+def test_shipped_action_demos_match_the_observation_only_demos(tmp_path):
+    for path in [*DEMO_DIR.glob("navigation_*_actions.npz"), *DEMO_DIR.glob("pendulum_*_actions.npz")]:
+        with np.load(path) as labelled, np.load(path.with_name(path.name.replace("_actions", ""))) as shipped:
+            np.testing.assert_array_equal(labelled["obs"], shipped["obs"])
+            assert labelled["acts"].shape[:2] == (labelled["obs"].shape[0], labelled["obs"].shape[1] - 1)
+    for name in ("pendulum_4.npz", "pendulum.json"):  # pendulum's labels need no expert: remade from the demos
+        (tmp_path / name).write_bytes((DEMO_DIR / name).read_bytes())
+    (written,) = make_action_demos("pendulum", out_dir=tmp_path)
+    np.testing.assert_allclose(np.load(written)["acts"], np.load(DEMO_DIR / "pendulum_4_actions.npz")["acts"])
+    transitions = action_transitions(DEMO_DIR / "navigation_4.npz")
+    assert len(transitions) == 400 and np.abs(transitions.acts).sum() > 0
+
+
+def test_observation_only_transitions_pair_consecutive_states():
+    from stable_baselines3.common.env_util import make_vec_env
+
+    transitions = observation_only_transitions(DEMO_DIR / "navigation_1.npz", make_vec_env("sb3_mpail/Navigation-v0", 1))
+    obs = np.load(DEMO_DIR / "navigation_1.npz")["obs"][0]
+    np.testing.assert_array_equal(transitions.obs, obs[:-1])
+    np.testing.assert_array_equal(transitions.next_obs, obs[1:])
+    assert not transitions.acts.any()
+
+
+@pytest.mark.parametrize("algo", ALGOS)
+def test_each_baseline_trains_one_tiny_round_and_plans_or_acts(algo, tmp_path):
+    configs = tiny_configs(tmp_path)
+    hyperparams = load_config(algo, "Pendulum-v1", configs)
+    evaluations = []
+
+    def on_eval(steps, found):
+        evaluations.append((steps, sorted(found)))
+
+    predictor = train_baseline(algo, "pendulum", DEMO_DIR / "pendulum_4.npz", 0, hyperparams, 32, on_eval, timesteps=64)
+    trajectories = evaluate(predictor, "Pendulum-v1", 2, seed=0)
+    assert len(trajectories) == 2 and all(len(t.acts) == 200 for t in trajectories)
+    if algo == "bc":
+        assert evaluations == [(0, ["bc"])]
+    else:
+        assert evaluations[-1][0] == 64 and len(evaluations) >= 2
+        assert evaluations[-1][1] == (["gail", "irl_mpc"] if algo == "irl_mpc" else [algo])
+
+
+def test_adversarial_runs_are_reproducible_from_the_seed(tmp_path):
+    configs = tiny_configs(tmp_path)
+    runs = {}
+    for algo in ("gail", "airl", "gail"):
+        model = train_baseline(algo, "Pendulum-v1", DEMO_DIR / "pendulum_4.npz", 3, load_config(algo, "Pendulum-v1", configs))
+        runs.setdefault(algo, []).append(th.cat([p.detach().flatten() for p in model.policy.parameters()]))
+    assert th.equal(runs["gail"][0], runs["gail"][1])
+    assert not th.equal(runs["gail"][0], runs["airl"][0])

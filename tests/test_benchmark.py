@@ -1,0 +1,78 @@
+"""The benchmark runner: its grid, resuming, and the report it writes."""
+
+import json
+
+import pytest
+from test_baselines import tiny_configs
+
+from sb3_mpail import benchmark
+from sb3_mpail.benchmark import main, make_jobs, mean_ci, steps_summary
+
+
+def test_gail_and_irl_mpc_share_a_run_and_seeds_come_first():
+    jobs = make_jobs(["pendulum"], ["bc", "irl_mpc", "gail", "mpail"], [4], [0, 1])
+    assert [(job["algos"], job["seed"]) for job in jobs] == [
+        (("mpail",), 0), (("bc",), 0), (("gail", "irl_mpc"), 0), (("mpail",), 1), (("bc",), 1), (("gail", "irl_mpc"), 1),
+    ]  # fmt: skip
+    assert {job["env_id"] for job in jobs} == {"Pendulum-v1"}
+
+
+def test_statistics():
+    mean, half_width = mean_ci([1.0, 2.0, 3.0])
+    assert mean == 2.0 and half_width == pytest.approx(4.303 / 3**0.5, rel=1e-3)  # t(0.975, 2) = 4.303
+    runs = [dict(steps_to_target=s) for s in (1000, None, 3000)]
+    assert steps_summary(runs) == "2000 (2/3)" and steps_summary(runs[1:2]) == "not reached (0/1)"
+
+
+def test_runner_writes_results_and_report(tmp_path):
+    configs, results, report = tiny_configs(tmp_path / "configs"), tmp_path / "results", tmp_path / "BENCHMARKS.md"
+    arguments = ["--envs", "pendulum", "navigation", "--algos", "gail", "irl_mpc", "bc", "--demos", "4", "--seeds", "1",
+                 "--config-dir", str(configs), "--results-dir", str(results), "--report-file", str(report),
+                 "--figures-dir", str(tmp_path / "figures"), "--eval-episodes", "2", "--ood-episodes", "3"]  # fmt: skip
+    main(arguments)
+    written = sorted(path.relative_to(results).as_posix() for path in results.rglob("*.json"))
+    assert written == [
+        f"{env}/{algo}_4demos_seed0.json" for env in ("navigation", "pendulum") for algo in ("bc", "gail", "irl_mpc")
+    ]
+    gail = json.loads((results / "navigation" / "gail_4demos_seed0.json").read_text())
+    assert gail["shared_run"] == ["gail", "irl_mpc"] and gail["curve"][-1][0] == 64
+    assert len(gail["ood"]["final_positions"]) == 3 and 0 <= gail["ood"]["reached"] <= 1
+    text = report.read_text()
+    assert "<!-- baselines-pendulum:start -->" in text and "<!-- baselines-navigation-ood:start -->" in text
+    assert "| BC (uses expert actions) | 4 | 1/1 |" in text
+    assert (tmp_path / "figures" / "baselines_navigation_ood.png").exists()
+
+
+def test_a_second_invocation_trains_nothing(tmp_path, monkeypatch, capsys):
+    configs, results = tiny_configs(tmp_path / "configs"), tmp_path / "results"
+    arguments = ["--envs", "pendulum", "--algos", "bc", "--demos", "4", "--seeds", "1", "--config-dir", str(configs),
+                 "--results-dir", str(results), "--report-file", str(tmp_path / "B.md"), "--figures-dir",
+                 str(tmp_path / "figures"), "--eval-episodes", "2"]  # fmt: skip
+    main(arguments)
+    before = (results / "pendulum" / "bc_4demos_seed0.json").read_text()
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a finished run was trained again")
+
+    monkeypatch.setattr(benchmark, "train_baseline", refuse)
+    main(arguments)
+    assert "0 runs to do" in capsys.readouterr().out
+    assert (results / "pendulum" / "bc_4demos_seed0.json").read_text() == before
+    main([*arguments[:7], "2", *arguments[8:], "--report-only"])  # a second seed asked for, not run
+    assert "| BC (uses expert actions) | 4 | 1/2 **incomplete** |" in (tmp_path / "B.md").read_text()
+
+
+def test_ray_is_optional_and_named_when_missing(tmp_path, monkeypatch):
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_ray(name, *args, **kwargs):
+        if name == "ray":
+            raise ImportError("No module named 'ray'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_ray)
+    job = dict(env_id="Pendulum-v1", algos=("bc",), n_demos=4, seed=0)
+    with pytest.raises(SystemExit, match="pip install"):
+        benchmark.run_grid([job], dict(results_dir=tmp_path, threads=1), ray_address="auto")
