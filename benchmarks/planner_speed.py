@@ -195,7 +195,7 @@ def run_case(implementation: str, n_envs: int, device: str, threads: int, min_se
 
 
 def cases(args: argparse.Namespace) -> List[tuple]:
-    """(implementation, n_envs, device, threads) in the order they run; pytorch_mppi only where it finishes."""
+    """(implementation, n_envs, device, threads) in the order they run; the slow baselines only up to a size."""
     planned = []
     for device in args.devices:
         implementations = ["sb3-mpail", "reference"] + (["pytorch_mppi"] if not args.no_pytorch_mppi else [])
@@ -204,7 +204,7 @@ def cases(args: argparse.Namespace) -> List[tuple]:
         for threads in args.threads if device == "cpu" else args.threads[:1]:
             for n_envs in args.envs:
                 for implementation in implementations:
-                    if implementation == "pytorch_mppi" and n_envs > args.max_pytorch_mppi_envs:
+                    if implementation in ("reference", "pytorch_mppi") and n_envs > args.max_baseline_envs:
                         continue
                     planned.append((implementation, n_envs, device, threads))
     return planned
@@ -264,7 +264,9 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     parser.add_argument("--min-seconds", type=float, default=2.0, help="time each case for at least this long")
     parser.add_argument("--compile", action="store_true", help="also time compile_planner=True")
     parser.add_argument("--no-pytorch-mppi", action="store_true")
-    parser.add_argument("--max-pytorch-mppi-envs", type=int, default=64, help="pytorch_mppi loops over envs: skip beyond")
+    parser.add_argument(
+        "--max-baseline-envs", type=int, default=64, help="time the reference and pytorch_mppi only up to this many envs"
+    )
     parser.add_argument(
         "--training-steps", type=int, default=4000,
         help="also time navigation training (train_navigation's defaults) with the plain and the optimised planner "
