@@ -1,6 +1,6 @@
 """The MPPI "policy": no actor network, an online planner over a learned cost, value and a dynamics model."""
 
-from typing import Any, Callable, Dict, Sequence, Tuple, Union
+from typing import Any, Dict, Sequence, Tuple, Union
 
 import numpy as np
 import torch as th
@@ -10,6 +10,7 @@ from torch import nn
 
 from sb3_mpail.mppi.costs import (
     FeatureMap,
+    FeatureSpec,
     TerminalValue,
     TransitionCost,
     make_transition_discriminator,
@@ -42,7 +43,8 @@ class MPPIPolicy(BasePolicy):
     :param value_hidden_sizes: hidden widths of the value network
     :param use_spectral_norm: spectral normalisation on the discriminator's layers
     :param discriminator_features: what the discriminator sees of a state: a fixed map ``features(states) ->
-        (batch, n_features)`` on ``(batch, state_dim)`` tensors (an ``nn.Module`` or a picklable function), applied to
+        (batch, n_features)`` on ``(batch, state_dim)`` tensors (an ``nn.Module``, a picklable function, or a list of
+        the state indices kept), applied to
         ``s`` and ``s'`` before the discriminator, which is built on ``n_features`` inputs. The planner, the dynamics
         and the value still use the full state. ``None``: the full observation. Its parameters, if any, are saved
         but not trained. Functions are saved with cloudpickle (module-level functions by reference, so their
@@ -71,7 +73,7 @@ class MPPIPolicy(BasePolicy):
         discriminator_hidden_sizes: Sequence[int] = (32, 32),
         value_hidden_sizes: Sequence[int] = (32, 32),
         use_spectral_norm: bool = True,
-        discriminator_features: Union[nn.Module, Callable[[th.Tensor], th.Tensor], None] = None,
+        discriminator_features: FeatureSpec | None = None,
         sampler: nn.Module | None = None,
         step_cost: nn.Module | None = None,
         terminal_value: nn.Module | None = None,

@@ -92,6 +92,13 @@ def test_rewards_and_planner_costs_see_only_the_features(demo_observations):
     assert costs[0].item() == pytest.approx(costs[1].item())
 
 
+def test_a_list_of_indices_selects_state_dimensions(demo_observations):
+    model = make_model(trajectories(demo_observations), features=[0, 1])
+    states = th.as_tensor(demo_observations[0])
+    assert th.equal(model.policy.features(states), states[:, :2])
+    np.testing.assert_array_equal(model.expert.observations[:5], demo_observations[0][:5, :2])
+
+
 def test_demos_can_already_be_features(demo_observations):
     partial = [episode[:, :2] for episode in demo_observations]
     model = make_model(trajectories(partial), demos_are_features=True).learn(32)
@@ -103,7 +110,9 @@ def test_demos_can_already_be_features(demo_observations):
 
 
 @pytest.mark.parametrize(
-    "features", [pendulum_angle, lambda states: states[:, 1:] * 2.0, ScaledAngle()], ids=["function", "lambda", "module"]
+    "features",
+    [pendulum_angle, lambda states: states[:, 1:] * 2.0, ScaledAngle(), [2, 0]],
+    ids=["function", "lambda", "module", "indices"],
 )
 def test_feature_map_survives_save_and_load(demo_observations, tmp_path, features):
     model = make_model(trajectories(demo_observations), features=features).learn(32)
@@ -126,5 +135,5 @@ def test_feature_map_survives_save_and_load(demo_observations, tmp_path, feature
 def test_feature_map_of_the_wrong_shape_is_refused(demo_observations):
     with pytest.raises(ValueError, match=r"\(batch, n_features\) tensor; for a batch of 2 it gave \(2,\)"):
         make_model(trajectories(demo_observations), features=lambda states: states[:, 0])
-    with pytest.raises(TypeError, match="discriminator_features must be an nn.Module or a callable"):
+    with pytest.raises(TypeError, match="discriminator_features must be an nn.Module, a callable or a list of state"):
         make_model(trajectories(demo_observations), features="angle")

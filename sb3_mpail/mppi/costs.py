@@ -17,6 +17,8 @@ from torch.nn.utils.parametrizations import spectral_norm
 
 from sb3_mpail.mppi.fused import FusedTransitionCost, FusedValue, freeze_mlp, fused_mlp_ok
 
+FeatureSpec = Union[nn.Module, Callable[[th.Tensor], th.Tensor], Sequence[int]]
+
 
 def make_transition_discriminator(
     observation_space: spaces.Box,
@@ -55,6 +57,22 @@ def make_value_network(state_dim: int, hidden_sizes: Sequence[int] = (32, 32)) -
     return nn.Sequential(*create_mlp(state_dim, 1, list(hidden_sizes), nn.ReLU))
 
 
+class FeatureSelection(nn.Module):
+    """
+    Discriminator features that are some of the state's dimensions, e.g. ``[0, 1, 6, 7]`` for the navigation car's
+    position and body-frame velocity (a list of indices is also what a YAML hyperparameter file can hold).
+
+    :param indices: the state dimensions kept, in this order
+    """
+
+    def __init__(self, indices: Sequence[int]):
+        super().__init__()
+        self.register_buffer("indices", th.as_tensor(list(indices), dtype=th.long))
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        return states[:, self.indices]
+
+
 class FeatureMap(nn.Module):
     """
     A fixed map from ``(batch, state_dim)`` states to ``(batch, n_features)`` discriminator features.
@@ -67,12 +85,17 @@ class FeatureMap(nn.Module):
         self.function = function
 
     @classmethod
-    def wrap(cls, features: Union[nn.Module, Callable[[th.Tensor], th.Tensor]]) -> nn.Module:
-        """The module itself, or a plain function wrapped in a :class:`FeatureMap`."""
+    def wrap(cls, features: FeatureSpec) -> nn.Module:
+        """The module itself, a :class:`FeatureSelection` of state indices, or a function wrapped in a :class:`FeatureMap`."""
         if isinstance(features, nn.Module):
             return features
+        if isinstance(features, Sequence) and len(features) > 0 and all(isinstance(index, int) for index in features):
+            return FeatureSelection(features)
         if not callable(features):
-            raise TypeError(f"discriminator_features must be an nn.Module or a callable, got {type(features).__name__}.")
+            raise TypeError(
+                "discriminator_features must be an nn.Module, a callable or a list of state indices, "
+                f"got {type(features).__name__}."
+            )
         return cls(features)
 
     def forward(self, states: th.Tensor) -> th.Tensor:
