@@ -16,7 +16,7 @@ from sb3_mpail.mppi.costs import (
     make_transition_discriminator,
     make_value_network,
 )
-from sb3_mpail.mppi.dynamics import DynamicsSpec, make_dynamics
+from sb3_mpail.mppi.dynamics import DynamicsSpec, LearnedDynamics, make_dynamics
 from sb3_mpail.mppi.planner import MPPIPlanner
 from sb3_mpail.mppi.sampling import GaussianSampler
 
@@ -141,9 +141,14 @@ class MPPIPolicy(BasePolicy):
         return states if self.discriminator_features is None else self.discriminator_features(states)
 
     def seed(self, seed: int | None) -> None:
-        """Re-seeds the planner's noise: the same seed gives the same plans and actions."""
+        """
+        Re-seeds the planner's noise (the same seed gives the same plans and actions) and, for a learned dynamics
+        model, its replay buffer and minibatch order (the same seed gives the same fitted model).
+        """
         self._seed = seed
         self._generator = None
+        if isinstance(self.dynamics, LearnedDynamics):
+            self.dynamics.seed(seed)
 
     @property
     def generator(self) -> th.Generator:

@@ -258,6 +258,11 @@ class LearnedDynamics(nn.Module):
         inputs = (th.cat((states, actions), dim=1) - self.input_mean) / self.input_std
         return states + self.net(inputs) * self.delta_std + self.delta_mean
 
+    def seed(self, seed: int | None) -> None:
+        """Re-seeds the replay buffer's replacement positions and the minibatch order."""
+        self.replay_buffer.rng = np.random.default_rng(seed)
+        self.rng = np.random.default_rng(seed)
+
     def current_learning_rate(self) -> float:
         decays = int(self.epochs_trained) // self.lr_decay_every
         return max(self.learning_rate * self.lr_decay**decays, self.min_learning_rate)
