@@ -21,3 +21,11 @@ if "sb3_mpail/ContinuousCartPole-v0" not in gym.registry:
         entry_point="sb3_mpail.envs.cartpole:ContinuousCartPoleEnv",
         max_episode_steps=200,
     )
+
+# The navigation car for one lap of sb3_mpail.envs.lap's closed track: 240 steps.
+if "sb3_mpail/NavigationLap-v0" not in gym.registry:
+    gym.register(
+        id="sb3_mpail/NavigationLap-v0",
+        entry_point="sb3_mpail.envs.navigation:NavigationEnv",
+        max_episode_steps=240,
+    )
