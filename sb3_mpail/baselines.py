@@ -232,9 +232,7 @@ class _EvalSchedule:
     def __call__(self, steps: int, predictors: Callable[[], Dict[str, Any]], force: bool = False) -> None:
         if self.on_eval is None or steps == self.last_step:
             return
-        passed = self.eval_every > 0 and (
-            self.last_step is None or steps // self.eval_every > self.last_step // self.eval_every
-        )
+        passed = self.eval_every > 0 and steps // self.eval_every > (self.last_step or 0) // self.eval_every
         if force or passed:
             self.last_step = steps
             with th.random.fork_rng():

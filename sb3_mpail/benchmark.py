@@ -52,7 +52,18 @@ GOAL_RADIUS = 2.0
 NAVIGATION = "sb3_mpail/Navigation-v0"
 
 
-def result_path(results_dir: Path, env_id: str, algo: str, n_demos: int, seed: int) -> Path:
+def grid_name(env_id: str, timesteps: Optional[int] = None) -> str:
+    """
+    The name of an env's grid (its results folder, report sections and figures): ``navigation``, or
+    ``navigation_200000steps`` when ``--timesteps`` overrides every budget.
+
+    :param env_id: gymnasium id
+    :param timesteps: the override, or ``None`` for the configs' budgets
+    """
+    return env_name_of(env_id) + ("" if timesteps is None else f"_{timesteps}steps")
+
+
+def result_path(results_dir: Path, env_id: str, algo: str, n_demos: int, seed: int, timesteps: Optional[int] = None) -> Path:
     """
     Where a run's result goes.
 
@@ -61,8 +72,9 @@ def result_path(results_dir: Path, env_id: str, algo: str, n_demos: int, seed: i
     :param algo: one of :data:`~sb3_mpail.baselines.ALGOS`
     :param n_demos: demo count
     :param seed: training seed
+    :param timesteps: the budget override, or ``None``
     """
-    return Path(results_dir) / env_name_of(env_id) / f"{algo}_{n_demos}demos_seed{seed}.json"
+    return Path(results_dir) / grid_name(env_id, timesteps) / f"{algo}_{n_demos}demos_seed{seed}.json"
 
 
 def make_jobs(envs: Sequence[str], algos: Sequence[str], demos: Sequence[int], seeds: Sequence[int]) -> List[Dict[str, Any]]:
@@ -85,6 +97,19 @@ def make_jobs(envs: Sequence[str], algos: Sequence[str], demos: Sequence[int], s
     ]
 
 
+def job_paths(job: Dict[str, Any], options: Dict[str, Any]) -> Dict[str, Path]:
+    """
+    The result files a job writes, by algorithm.
+
+    :param job: an entry of :func:`make_jobs`
+    :param options: :func:`run_job`'s options
+    """
+    return {
+        algo: result_path(options["results_dir"], job["env_id"], algo, job["n_demos"], job["seed"], options.get("timesteps"))
+        for algo in job["algos"]
+    }
+
+
 def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
     """
     Trains one job and writes each of its algorithms' result file; skips it when all exist.
@@ -95,7 +120,7 @@ def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
     :return: the result files written
     """
     env_id, algos, n_demos, seed = job["env_id"], job["algos"], job["n_demos"], job["seed"]
-    paths = {algo: result_path(options["results_dir"], env_id, algo, n_demos, seed) for algo in algos}
+    paths = job_paths(job, options)
     if all(path.exists() for path in paths.values()):
         return []
     th.set_num_threads(options["threads"])
@@ -151,8 +176,7 @@ def run_grid(jobs: List[Dict[str, Any]], options: Dict[str, Any], workers: int =
     :param workers: local processes
     :param ray_address: a Ray cluster's address (``auto`` for the local one)
     """
-    jobs = [job for job in jobs if not all(result_path(options["results_dir"], job["env_id"], algo, job["n_demos"],
-                                                       job["seed"]).exists() for algo in job["algos"])]  # fmt: skip
+    jobs = [job for job in jobs if not all(path.exists() for path in job_paths(job, options).values())]
     print(f"{len(jobs)} runs to do", flush=True)
     if ray_address is not None:
         try:
@@ -176,13 +200,14 @@ def run_grid(jobs: List[Dict[str, Any]], options: Dict[str, Any], workers: int =
 # tables and figures
 
 
-def load_results(results_dir: Path) -> List[Dict[str, Any]]:
+def load_results(results_dir: Path, name: str) -> List[Dict[str, Any]]:
     """
-    Every result file under ``results_dir``.
+    Every result of one grid.
 
     :param results_dir: the grid's folder
+    :param name: :func:`grid_name`
     """
-    return [json.loads(path.read_text()) for path in sorted(Path(results_dir).glob("*/*.json"))]
+    return [json.loads(path.read_text()) for path in sorted((Path(results_dir) / name).glob("*.json"))]
 
 
 def mean_ci(values: Sequence[float]) -> Tuple[float, float]:
@@ -344,44 +369,47 @@ def plot_ood(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int, 
 
 
 def write_report(
-    results: List[Dict[str, Any]],
+    results_dir: Path,
     envs: Sequence[str],
     algos: Sequence[str],
     demos: Sequence[int],
     n_seeds: int,
     command: str,
+    timesteps: Optional[int] = None,
     report_file: Path = BENCHMARKS_FILE,
     figures_dir: Path = FIGURES_DIR,
-    config_dir: Path = CONFIG_DIR,
 ) -> None:
     """
-    Writes one BENCHMARKS.md section per env (``baselines-<env>``; navigation also ``baselines-navigation-ood``) and
-    the figures.
+    Writes one BENCHMARKS.md section per env grid (``baselines-<grid name>``; navigation also
+    ``baselines-<grid name>-ood``) and the figures, from every result of the grid found.
 
-    :param results: :func:`load_results`
+    :param results_dir: the grid's folder
     :param envs: env ids or short names
     :param algos: table rows
     :param demos: demo counts
     :param n_seeds: seeds asked for
     :param command: the command line to quote
+    :param timesteps: the budget override, or ``None``
     :param report_file: the markdown file
     :param figures_dir: folder of the figures
-    :param config_dir: folder of the configs (for the budgets quoted)
     """
     for env in envs:
-        env_id, name = env_id_of(env), env_name_of(env_id_of(env))
-        stats = expert_stats(env_id)
-        budgets = {algo: load_config(algo, env_id, config_dir)["n_timesteps"] for algo in algos}
+        env_id = env_id_of(env)
+        name, stats = grid_name(env_id, timesteps), expert_stats(env_id)
+        results = load_results(results_dir, name)
+        budgets = {algo: sorted({r["n_timesteps"] for r in results if r["algo"] == algo}) for algo in algos}
         figures = [plot_curves(results, env_id, n, figures_dir / f"baselines_{name}_{n}demos.png") for n in demos]
         lines = [
             f"## Baselines on {env_id}",
             "",
             f"Normalised score = (R - random) / (expert - random), random {stats['random_return_mean']:.1f}, expert "
             f"{stats['expert_return_mean']:.1f} ({stats['expert_algo']}); final deterministic evaluation on "
-            f"episodes from fixed seeds; mean ± 95% CI (Student's t) over seeds. Env-step budgets (zoo_configs): "
-            + ", ".join(f"{ALGO_LABELS[a]} {budgets[a]}" for a in algos)
-            + ". BC uses the expert's actions and no env steps; IRL-MPC's env steps are its GAIL run's. Learning curves "
-            "are evaluated about every tenth of the budget, so env steps to 0.9 are resolved to that grid.",
+            f"episodes from fixed seeds; mean ± 95% CI (Student's t) over seeds. Env-step budgets: "
+            + ", ".join(f"{ALGO_LABELS[a]} {'/'.join(map(str, budgets[a])) or '-'}" for a in algos)
+            + " (zoo_configs/<algo>.yml unless `--timesteps` overrides them). BC uses the expert's actions and no env "
+            "steps; IRL-MPC's env steps are its GAIL run's. Learning curves are evaluated once the env-step count passes "
+            "each multiple of `--eval-every` (default a tenth of the budget), after whole rollouts or rounds, so env "
+            "steps to 0.9 are resolved to that grid.",
             "",
             grid_table(results, env_id, algos, demos, n_seeds),
             "",
@@ -397,9 +425,9 @@ def write_report(
         write_section(f"baselines-{name}", "\n".join(lines), report_file)
         if env_id == NAVIGATION:
             n_ood = 4 if 4 in demos else demos[0]
-            figure = plot_ood(results, algos, n_ood, figures_dir / "baselines_navigation_ood.png")
+            figure = plot_ood(results, algos, n_ood, figures_dir / f"baselines_{name}_ood.png")
             ood = [
-                "## Navigation out of distribution",
+                f"## Navigation out of distribution ({name})",
                 "",
                 f"Agents trained on {n_ood} demos (starts within 1 m of the origin), run deterministically for 100 steps "
                 "from starts uniform in the 40 x 40 m box centred at the origin with uniform heading (env option "
@@ -412,7 +440,7 @@ def write_report(
             if figure is not None:
                 ood.append(f"![final positions](benchmarks/figures/{figure.name})")
             ood += ["", f"Command: `{command}`."]
-            write_section("baselines-navigation-ood", "\n".join(ood), report_file)
+            write_section(f"baselines-{name}-ood", "\n".join(ood), report_file)
 
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
@@ -427,7 +455,7 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     parser.add_argument("--eval-episodes", type=int, default=10, help="episodes per learning-curve point")
     parser.add_argument("--eval-every", type=int, default=0, help="env steps between curve points (0: a tenth of the budget)")
     parser.add_argument("--ood-episodes", type=int, default=100, help="navigation OOD episodes per run (0: none)")
-    parser.add_argument("--timesteps", type=int, default=None, help="override every budget (smoke tests)")
+    parser.add_argument("--timesteps", type=int, default=None, help="override every budget (a separate grid and report)")
     parser.add_argument("--config-dir", type=Path, default=CONFIG_DIR)
     parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR)
     parser.add_argument("--report-file", type=Path, default=BENCHMARKS_FILE)
@@ -451,9 +479,11 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     command = "python -m sb3_mpail.benchmark " + " ".join(
         [f"--envs {' '.join(args.envs)}", f"--algos {' '.join(args.algos)}", f"--demos {' '.join(map(str, args.demos))}",
          f"--seeds {args.seeds}"]
+        + ([f"--timesteps {args.timesteps}"] if args.timesteps is not None else [])
+        + ([f"--eval-every {args.eval_every}"] if args.eval_every else [])
     )  # fmt: skip
-    write_report(load_results(args.results_dir), args.envs, args.algos, args.demos, args.seeds, command, args.report_file,
-                 args.figures_dir, args.config_dir)  # fmt: skip
+    write_report(args.results_dir, args.envs, args.algos, args.demos, args.seeds, command, args.timesteps, args.report_file,
+                 args.figures_dir)  # fmt: skip
 
 
 if __name__ == "__main__":

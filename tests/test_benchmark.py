@@ -60,6 +60,10 @@ def test_a_second_invocation_trains_nothing(tmp_path, monkeypatch, capsys):
     assert (results / "pendulum" / "bc_4demos_seed0.json").read_text() == before
     main([*arguments[:7], "2", *arguments[8:], "--report-only"])  # a second seed asked for, not run
     assert "| BC (uses expert actions) | 4 | 1/2 **incomplete** |" in (tmp_path / "B.md").read_text()
+    monkeypatch.undo()
+    main([*arguments, "--timesteps", "5"])  # overridden budgets are a grid of their own, reported apart
+    assert (results / "pendulum_5steps" / "bc_4demos_seed0.json").exists()
+    assert "<!-- baselines-pendulum_5steps:start -->" in (tmp_path / "B.md").read_text()
 
 
 def test_ray_is_optional_and_named_when_missing(tmp_path, monkeypatch):
