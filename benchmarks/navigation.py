@@ -1,0 +1,165 @@
+"""
+MPAIL on ``sb3_mpail/Navigation-v0``: learning curves of the main command's default settings over several seeds.
+
+Each seed runs ``python -m sb3_mpail.train_navigation`` (default settings, the given demos) with a deterministic
+evaluation every ``--eval-freq`` env steps; the models stay in ``--out-dir/seed<N>/model.zip`` for
+``benchmarks/navigation_ood.py``. Writes the learning-curve figure to ``benchmarks/figures/`` and the
+``navigation`` section of BENCHMARKS.md.
+
+Usage::
+
+    python -m benchmarks.navigation                    # 3 seeds x 4 demos, one seed after the other
+    python -m benchmarks.navigation --report-only      # rewrite the section from the saved results
+"""
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Dict, List
+
+import numpy as np
+
+from benchmarks.report import machine_description, write_section
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+FIGURES = REPO_ROOT / "benchmarks" / "figures"
+DEFAULT_OUT_DIR = REPO_ROOT / "runs" / "benchmarks" / "navigation"
+TARGET = 0.9
+
+
+def run_seed(seed: int, args: argparse.Namespace) -> subprocess.Popen:
+    out_dir = Path(args.out_dir) / f"seed{seed}"
+    command = [
+        sys.executable, "-W", "ignore", "-m", "sb3_mpail.train_navigation",
+        "--demos", args.demos, "--seed", str(seed), "--out-dir", str(out_dir),
+        "--eval-freq", str(args.eval_freq), "--n-eval-episodes", str(args.n_eval_episodes),
+        "--threads", str(args.threads), "--no-progress-bar", *args.extra,
+    ]  # fmt: skip
+    if args.timesteps is not None:
+        command += ["--timesteps", str(args.timesteps)]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    log = open(out_dir / "train.log", "w")
+    print(" ".join(command[3:]), f"> {out_dir / 'train.log'}", flush=True)
+    return subprocess.Popen(command, cwd=REPO_ROOT, stdout=log, stderr=subprocess.STDOUT)
+
+
+def steps_to_reach(curve: List[Dict[str, float]], target: float = TARGET) -> int | None:
+    """The first evaluated step count at which the normalised score reached ``target`` (``None``: never)."""
+    for point in curve:
+        if point["normalized_score"] >= target:
+            return int(point["steps"])
+    return None
+
+
+def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
+    from sb3_mpail.plotting import plot_learning_curves
+    from sb3_mpail.train_navigation import demo_reference_returns
+
+    results = []
+    for seed in args.seeds:
+        path = Path(args.out_dir) / f"seed{seed}" / "results.json"
+        if not path.exists():
+            raise SystemExit(f"{path} is missing: run the benchmark for seed {seed} first.")
+        results.append(json.loads(path.read_text()))
+    scores = np.array([r["normalized_score"] for r in results])
+    returns = np.array([r["mean_return"] for r in results])
+    demos_name = Path(args.demos).name
+    figure = FIGURES / f"navigation_learning_curves_{Path(args.demos).stem}.png"
+    curves = [
+        (np.array([p["steps"] for p in r["learning_curve"]]), np.array([p["normalized_score"] for p in r["learning_curve"]]))
+        for r in results
+    ]
+    plot_learning_curves(
+        curves,
+        figure,
+        labels=[f"seed {r['seed']}" for r in results],
+        title=f"MPAIL on Navigation-v0, {demos_name}, default CPU settings ({len(results)} seeds; deterministic eval, "
+        f"{results[0]['n_eval_episodes']} episodes)",
+    )
+    example = Path(args.out_dir) / f"seed{args.seeds[0]}" / "navigation.png"
+    example_figure = FIGURES / f"navigation_seed{args.seeds[0]}_{Path(args.demos).stem}.png"
+    if example.exists():
+        shutil.copyfile(example, example_figure)
+    first = results[0]
+    random_return, expert_return = demo_reference_returns()
+    command = "python -m benchmarks.navigation " + " ".join(option for option in sys.argv[1:] if option != "--report-only")
+    lines = [
+        "## Navigation (`sb3_mpail/Navigation-v0`): learning with the default CPU settings",
+        "",
+        f"Command: `{command.strip()}` (each seed runs `{first['command'].split(' --demos')[0]} --demos {args.demos} "
+        f"--seed N --eval-freq {args.eval_freq} ...`). Machine: {machine_description()}; the CPU was shared with "
+        "other jobs, so wall-clock figures are upper bounds.",
+        "",
+        f"Settings (the main command's defaults): {first['timesteps']} env steps, {first['n_envs']} envs, planner "
+        f"`{first['policy_kwargs']}` (bicycle model), algorithm `{first['algorithm_kwargs']}`, every other setting "
+        "the paper's. Score = (R - random) / (expert - random) with R the deterministic planner's mean return over "
+        f"{first['n_eval_episodes']} evaluation episodes; expert {expert_return:.1f}, random {random_return:.1f} "
+        "(`demos/navigation.json`).",
+        "",
+        f"**Final normalised score: {scores.mean():.3f} ± {scores.std():.3f}** (mean ± std over {len(scores)} seeds; "
+        f"return {returns.mean():.0f} ± {returns.std():.0f}); target >= {TARGET}: "
+        f"**{'met' if scores.mean() >= TARGET else 'not met'}**.",
+        "",
+        f"| seed | final return | final score | env steps to reach {TARGET} | training wall-clock (s, evals excluded) |",
+        "|---|---|---|---|---|",
+    ]
+    for r in results:
+        reach = steps_to_reach(r["learning_curve"])
+        lines.append(
+            f"| {r['seed']} | {r['mean_return']:.0f} ± {r['std_return']:.0f} | {r['normalized_score']:.3f} | "
+            f"{reach if reach is not None else 'not reached'} | {r['train_seconds']:.0f} |"
+        )
+    if wall_seconds is not None:
+        lines += ["", f"Whole benchmark wall-clock (training, evaluations, figures): {wall_seconds / 60:.1f} min."]
+    lines += [
+        "",
+        f"Learning curves (thin: seeds; thick: mean; band: min-max): `{figure.relative_to(REPO_ROOT)}`; "
+        f"the planner's paths and learned cost map of seed {args.seeds[0]}: `{example_figure.relative_to(REPO_ROOT)}`.",
+        "",
+        f"![navigation learning curves]({figure.relative_to(REPO_ROOT).as_posix()})",
+    ]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--demos", default="demos/navigation_4.npz")
+    parser.add_argument("--timesteps", type=int, default=None, help="default: the main command's")
+    parser.add_argument("--eval-freq", type=int, default=10000)
+    parser.add_argument("--n-eval-episodes", type=int, default=10)
+    parser.add_argument("--jobs", type=int, default=1, help="seeds trained at once")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads per seed")
+    parser.add_argument("--out-dir", default=str(DEFAULT_OUT_DIR))
+    parser.add_argument("--report-only", action="store_true", help="rewrite the section from saved results")
+    parser.add_argument("--section", default="navigation", help="BENCHMARKS.md section to write")
+    parser.add_argument("extra", nargs="*", help="further train_navigation options, after --")
+    args = parser.parse_args()
+    started = time.perf_counter()
+    wall_seconds = None
+    if not args.report_only:
+        pending, running = list(args.seeds), []
+        while pending or running:
+            while pending and len(running) < args.jobs:
+                seed = pending.pop(0)
+                running.append((seed, run_seed(seed, args)))
+            time.sleep(5)
+            for seed, process in list(running):
+                if process.poll() is not None:
+                    running.remove((seed, process))
+                    if process.returncode != 0:
+                        raise SystemExit(f"seed {seed} failed (exit {process.returncode}); see its train.log")
+                    result = json.loads((Path(args.out_dir) / f"seed{seed}" / "results.json").read_text())
+                    print(f"seed {seed}: score {result['normalized_score']:.3f}, {result['train_seconds']:.0f} s", flush=True)
+        wall_seconds = time.perf_counter() - started
+    markdown = report(args, wall_seconds)
+    write_section(args.section, markdown)
+    print(markdown)
+
+
+if __name__ == "__main__":
+    main()

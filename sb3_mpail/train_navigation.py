@@ -1,0 +1,333 @@
+"""
+Train MPAIL on ``sb3_mpail/Navigation-v0`` from observation-only demos, evaluate the planner, save it and plot it.
+
+Usage::
+
+    python -m sb3_mpail.train_navigation                      # CPU defaults (a few minutes on 2 cores)
+    python -m sb3_mpail.train_navigation --paper-settings     # the paper's N512/H10/J5, 64 envs (GPU)
+    python -m sb3_mpail.train_navigation --n-samples 64 --timesteps 20000 --out-dir runs/quick
+
+Writes ``<out-dir>/model.zip`` (loadable with ``MPAIL.load``, no demos or env needed), ``<out-dir>/navigation.png``
+(planner paths over the demos; the learned cost map) and ``<out-dir>/results.json`` (returns, normalised score,
+settings, wall-clock and, with ``--eval-freq``, the learning curve).
+"""
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any, Dict, List, Sequence, Tuple
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+
+import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
+from sb3_mpail.mpail import MPAIL
+
+ENV_ID = "sb3_mpail/Navigation-v0"
+REPO_ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_DEMOS = REPO_ROOT / "demos" / "navigation_4.npz"
+DEMO_INFO = REPO_ROOT / "demos" / "navigation.json"
+#: evaluation envs are seeded from ``seed + EVAL_SEED_OFFSET`` so they never replay the training starts
+EVAL_SEED_OFFSET = 10_000
+
+#: CPU defaults, tuned to reach near-expert return on 2 CPU cores in minutes (see BENCHMARKS.md, "navigation")
+DEFAULT_TIMESTEPS = 150_000
+DEFAULT_N_ENVS = 8
+DEFAULT_POLICY_KWARGS: Dict[str, Any] = dict(n_samples=256, horizon=10, n_iterations=3)
+DEFAULT_ALGORITHM_KWARGS: Dict[str, Any] = dict(n_steps=100, discriminator_update_interval=1)
+
+#: the paper's table (N 512, H 10, J 5) with 64 envs and 200 steps per env per iteration, for a GPU run
+PAPER_TIMESTEPS = 1_000_000
+PAPER_N_ENVS = 64
+PAPER_POLICY_KWARGS: Dict[str, Any] = dict(n_samples=512, horizon=10, n_iterations=5)
+PAPER_ALGORITHM_KWARGS: Dict[str, Any] = dict(n_steps=200, discriminator_update_interval=3)
+
+# command-line planner and algorithm overrides: option name -> (keyword, type, where it goes)
+POLICY_OPTIONS = {"n_samples": int, "horizon": int, "n_iterations": int, "noise_std": float, "markup": float}
+ALGORITHM_OPTIONS = {
+    "n_steps": int,
+    "discriminator_update_interval": int,
+    "discriminator_learning_rate": float,
+    "value_learning_rate": float,
+    "initial_temperature": float,
+    "temperature_decay": float,
+    "n_epochs": int,
+    "n_minibatches": int,
+}
+
+
+def demo_reference_returns(path: Path = DEMO_INFO) -> Tuple[float, float]:
+    """The random policy's and the expert's mean returns, from ``demos/navigation.json``."""
+    info = json.loads(Path(path).read_text())
+    return float(info["random_return_mean"]), float(info["expert_return_mean"])
+
+
+def normalized_score(episode_return: float, info_path: Path = DEMO_INFO) -> float:
+    """``(R - random) / (expert - random)``: 0 is the random policy, 1 the expert."""
+    random_return, expert_return = demo_reference_returns(info_path)
+    return (episode_return - random_return) / (expert_return - random_return)
+
+
+def make_model(
+    demos: str | Path = DEFAULT_DEMOS,
+    n_envs: int = DEFAULT_N_ENVS,
+    seed: int = 0,
+    device: str = "cpu",
+    policy_kwargs: Dict[str, Any] | None = None,
+    verbose: int = 0,
+    **algorithm_kwargs: Any,
+) -> MPAIL:
+    """
+    An untrained MPAIL model on ``n_envs`` navigation envs with this module's defaults, overridden by the arguments.
+
+    :param demos: observation-only demos (``.npz`` or any source :func:`~sb3_mpail.demos.load_demos` reads)
+    :param n_envs: parallel training envs
+    :param seed: seed of the envs, networks and planner noise
+    :param device: ``"cpu"``, ``"cuda"`` or ``"auto"``
+    :param policy_kwargs: planner settings replacing :data:`DEFAULT_POLICY_KWARGS` key by key
+    :param algorithm_kwargs: MPAIL constructor arguments replacing :data:`DEFAULT_ALGORITHM_KWARGS` key by key
+    """
+    env = make_vec_env(ENV_ID, n_envs=n_envs, seed=seed)
+    return MPAIL(
+        "MlpMPPI",
+        env,
+        str(demos),
+        policy_kwargs={**DEFAULT_POLICY_KWARGS, **(policy_kwargs or {})},
+        seed=seed,
+        device=device,
+        verbose=verbose,
+        **{**DEFAULT_ALGORITHM_KWARGS, **algorithm_kwargs},
+    )
+
+
+def run_episodes(
+    model: MPAIL, n_episodes: int, seed: int, start_region: str | float = "default", deterministic: bool = True
+) -> Tuple[np.ndarray, np.ndarray, List[np.ndarray]]:
+    """
+    Drives ``n_episodes`` full episodes at once (one env each) with ``predict``, carrying each env's plan as state.
+
+    :return: episode returns ``(n,)``, final distances to the goal ``(n,)`` and each episode's observations
+        ``(T + 1, 12)``
+    """
+    env = make_vec_env(ENV_ID, n_envs=n_episodes, seed=seed, env_kwargs=dict(start_region=start_region))
+    observations = env.reset()
+    trajectories: List[List[np.ndarray]] = [[obs] for obs in observations]
+    returns = np.zeros(n_episodes)
+    finished = np.zeros(n_episodes, dtype=bool)
+    final_distance = np.zeros(n_episodes)
+    plan, starts = None, np.ones(n_episodes, dtype=bool)
+    while not finished.all():
+        actions, plan = model.predict(observations, state=plan, episode_start=starts, deterministic=deterministic)
+        observations, rewards, dones, infos = env.step(actions)
+        for index in np.flatnonzero(~finished):
+            returns[index] += rewards[index]
+            last = infos[index]["terminal_observation"] if dones[index] else observations[index]
+            trajectories[index].append(last)
+            if dones[index]:
+                finished[index] = True
+                final_distance[index] = infos[index]["distance_to_goal"]
+        starts = dones
+    env.close()
+    return returns, final_distance, [np.stack(t) for t in trajectories]
+
+
+def evaluate(model: MPAIL, n_episodes: int = 10, seed: int = EVAL_SEED_OFFSET) -> Tuple[float, float]:
+    """Mean and std of the deterministic planner's return over ``n_episodes`` (SB3's ``evaluate_policy``)."""
+    env = make_vec_env(ENV_ID, n_envs=min(n_episodes, 10), seed=seed)
+    mean_return, std_return = evaluate_policy(model, env, n_eval_episodes=n_episodes, deterministic=True)
+    env.close()
+    return float(mean_return), float(std_return)
+
+
+class LearningCurveCallback(BaseCallback):
+    """
+    Every ``eval_freq`` env steps (checked at the end of each rollout), the deterministic planner's mean return over
+    ``n_eval_episodes`` and its normalised score; ``curve`` holds ``(env steps, mean return, normalised score)``.
+    Evaluation time is kept apart in ``eval_seconds`` so the training wall-clock can be reported without it.
+    """
+
+    def __init__(self, eval_freq: int, n_eval_episodes: int = 10, seed: int = EVAL_SEED_OFFSET, verbose: int = 0):
+        super().__init__(verbose)
+        self.eval_freq = eval_freq
+        self.n_eval_episodes = n_eval_episodes
+        self.eval_seed = seed
+        self.curve: List[Tuple[int, float, float]] = []
+        self.eval_seconds = 0.0
+        self._next = eval_freq
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        if self.num_timesteps >= self._next:
+            self._next += self.eval_freq
+            self.record()
+
+    def record(self) -> None:
+        started = time.perf_counter()
+        mean_return, _ = evaluate(self.model, self.n_eval_episodes, self.eval_seed)
+        self.eval_seconds += time.perf_counter() - started
+        self.curve.append((int(self.num_timesteps), mean_return, normalized_score(mean_return)))
+        if self.verbose:
+            print(f"[eval] {self.num_timesteps} steps: return {mean_return:.1f}, score {normalized_score(mean_return):.3f}")
+
+
+def _has_progress_bar_dependencies() -> bool:
+    try:
+        import rich  # noqa: F401
+        import tqdm  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="python -m sb3_mpail.train_navigation",
+        description="Train MPAIL on sb3_mpail/Navigation-v0 from observation-only demos, evaluate, save and plot.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument("--demos", default=str(DEFAULT_DEMOS.relative_to(REPO_ROOT)), help="observation-only demos (.npz)")
+    parser.add_argument(
+        "--timesteps", type=int, default=None, help=f"env steps (default {DEFAULT_TIMESTEPS}; paper {PAPER_TIMESTEPS})"
+    )
+    parser.add_argument(
+        "--n-envs", type=int, default=None, help=f"parallel envs (default {DEFAULT_N_ENVS}; paper {PAPER_N_ENVS})"
+    )
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--device", choices=("cpu", "cuda", "auto"), default="cpu")
+    parser.add_argument("--out-dir", default="runs/navigation")
+    parser.add_argument(
+        "--paper-settings",
+        action="store_true",
+        help="the paper's N512/H10/J5, 64 envs, 200 steps per env per iteration, discriminator every 3rd iteration "
+        "(meant for a GPU: add --device cuda)",
+    )
+    planner = parser.add_argument_group("planner overrides (policy_kwargs)")
+    for name, kind in POLICY_OPTIONS.items():
+        planner.add_argument("--" + name.replace("_", "-"), type=kind, default=None)
+    algorithm = parser.add_argument_group("algorithm overrides (MPAIL constructor)")
+    for name, kind in ALGORITHM_OPTIONS.items():
+        algorithm.add_argument("--" + name.replace("_", "-"), type=kind, default=None)
+    parser.add_argument("--n-eval-episodes", type=int, default=10, help="deterministic evaluation episodes")
+    parser.add_argument("--n-plot-episodes", type=int, default=5, help="planner episodes drawn in the figure")
+    parser.add_argument("--eval-freq", type=int, default=0, help="record a learning curve every this many env steps (0: off)")
+    parser.add_argument("--no-plot", action="store_true", help="skip the figure (no matplotlib needed)")
+    parser.add_argument("--no-progress-bar", action="store_true")
+    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    return parser.parse_args(argv)
+
+
+def settings_from_args(args: argparse.Namespace) -> Dict[str, Any]:
+    """The run's full settings: defaults (or the paper's), then the command-line overrides."""
+    if args.paper_settings:
+        timesteps, n_envs = PAPER_TIMESTEPS, PAPER_N_ENVS
+        policy_kwargs, algorithm_kwargs = dict(PAPER_POLICY_KWARGS), dict(PAPER_ALGORITHM_KWARGS)
+    else:
+        timesteps, n_envs = DEFAULT_TIMESTEPS, DEFAULT_N_ENVS
+        policy_kwargs, algorithm_kwargs = dict(DEFAULT_POLICY_KWARGS), dict(DEFAULT_ALGORITHM_KWARGS)
+    policy_kwargs.update({name: getattr(args, name) for name in POLICY_OPTIONS if getattr(args, name) is not None})
+    algorithm_kwargs.update({name: getattr(args, name) for name in ALGORITHM_OPTIONS if getattr(args, name) is not None})
+    return dict(
+        timesteps=args.timesteps if args.timesteps is not None else timesteps,
+        n_envs=args.n_envs if args.n_envs is not None else n_envs,
+        policy_kwargs=policy_kwargs,
+        algorithm_kwargs=algorithm_kwargs,
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
+    """Runs the command; returns what it wrote to ``results.json``."""
+    args = parse_args(argv)
+    if args.threads is not None:
+        th.set_num_threads(args.threads)
+    if args.device == "cuda" and not th.cuda.is_available():
+        raise SystemExit("--device cuda was asked for but torch sees no CUDA device; use --device cpu or auto.")
+    settings = settings_from_args(args)
+    out_dir = Path(args.out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    demos = Path(args.demos)
+    if not demos.exists() and (REPO_ROOT / demos).exists():
+        demos = REPO_ROOT / demos
+    progress_bar = not args.no_progress_bar and _has_progress_bar_dependencies()
+    if not args.no_progress_bar and not progress_bar:
+        print("(no progress bar: it needs tqdm and rich, e.g. pip install tqdm rich)")
+
+    model = make_model(
+        demos,
+        n_envs=settings["n_envs"],
+        seed=args.seed,
+        device=args.device,
+        policy_kwargs=settings["policy_kwargs"],
+        **settings["algorithm_kwargs"],
+    )
+    print(
+        f"MPAIL on {ENV_ID}: {settings['timesteps']} env steps, {settings['n_envs']} envs, demos {demos}, "
+        f"device {model.device}, planner {settings['policy_kwargs']}, algorithm {settings['algorithm_kwargs']}"
+    )
+    callback = None
+    if args.eval_freq > 0:
+        callback = LearningCurveCallback(args.eval_freq, args.n_eval_episodes, seed=args.seed + EVAL_SEED_OFFSET, verbose=1)
+    started = time.perf_counter()
+    model.learn(settings["timesteps"], callback=callback, progress_bar=progress_bar)
+    train_seconds = time.perf_counter() - started
+    if callback is not None:
+        train_seconds -= callback.eval_seconds
+    model_path = out_dir / "model.zip"
+    model.save(model_path)
+
+    mean_return, std_return = evaluate(model, args.n_eval_episodes, seed=args.seed + EVAL_SEED_OFFSET)
+    score = normalized_score(mean_return)
+    if callback is not None:
+        # the curve ends with this evaluation of the final model (one taken before the last update is replaced)
+        if callback.curve and callback.curve[-1][0] == model.num_timesteps:
+            callback.curve.pop()
+        callback.curve.append((int(model.num_timesteps), mean_return, score))
+    random_return, expert_return = demo_reference_returns()
+    print(
+        f"deterministic planner over {args.n_eval_episodes} episodes: return {mean_return:.1f} +- {std_return:.1f} "
+        f"(expert {expert_return:.1f}, random {random_return:.1f}), normalised score {score:.3f}"
+    )
+    results: Dict[str, Any] = dict(
+        command="python -m sb3_mpail.train_navigation " + " ".join(sys.argv[1:] if argv is None else argv),
+        demos=str(args.demos),
+        seed=args.seed,
+        device=str(model.device),
+        **settings,
+        train_seconds=round(train_seconds, 1),
+        mean_return=mean_return,
+        std_return=std_return,
+        normalized_score=score,
+        n_eval_episodes=args.n_eval_episodes,
+        model=str(model_path),
+    )
+    if callback is not None:
+        results["learning_curve"] = [dict(steps=s, mean_return=r, normalized_score=n) for s, r, n in callback.curve]
+    if not args.no_plot and args.n_plot_episodes > 0:
+        from sb3_mpail.plotting import plot_navigation
+
+        with np.load(demos) as data:
+            demo_observations = data["obs"]
+        _, distances, trajectories = run_episodes(model, args.n_plot_episodes, seed=args.seed + EVAL_SEED_OFFSET)
+        figure = plot_navigation(
+            model,
+            demo_observations,
+            trajectories,
+            out_dir / "navigation.png",
+            title=f"MPAIL on Navigation-v0 ({demos.name}, {settings['timesteps']} steps, seed {args.seed}): "
+            f"return {mean_return:.0f}, normalised score {score:.2f}",
+        )
+        results["figure"] = str(figure)
+        print(f"figure: {figure} (final distance to goal of the drawn episodes: {np.round(distances, 2).tolist()} m)")
+    (out_dir / "results.json").write_text(json.dumps(results, indent=2))
+    print(f"model: {model_path}")
+    return results
+
+
+if __name__ == "__main__":
+    main()
