@@ -149,7 +149,7 @@ def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
             env_id=env_id, algo=name, n_demos=n_demos, seed=seed, n_timesteps=budget, curve=curves[name],
             final_score=curves[name][-1][1], final_return=curves[name][-1][2],
             steps_to_target=next((steps for steps, score, _ in curves[name] if score >= TARGET), None),
-            train_seconds=round(seconds, 1), shared_run=list(algos),
+            train_seconds=round(seconds, 1), shared_run=list(algos), hyperparams=hyperparams,
         )  # fmt: skip
         if env_id == NAVIGATION and options["ood_episodes"] > 0:
             trajectories = evaluate(finals[name], env_id, options["ood_episodes"], OOD_SEED, dict(start_region="ood"))
@@ -162,7 +162,7 @@ def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
             )
         path.parent.mkdir(parents=True, exist_ok=True)
         partial = path.with_name(path.name + ".partial")
-        partial.write_text(json.dumps(result))
+        partial.write_text(json.dumps(result, default=str))
         partial.replace(path)
     return [str(path) for path in paths.values()]
 

@@ -58,6 +58,8 @@ def test_every_config_has_the_zoo_keys_and_mpail_s_budget(algo, env_id):
 def test_irl_mpc_config_carries_and_checks_its_gail_run(tmp_path):
     entry = load_config("irl_mpc", "Pendulum-v1")
     assert entry["gail"] == load_config("gail", "Pendulum-v1")
+    for env_id in ENVS:  # IRL-MPC plans with MPAIL's planner
+        assert load_config("irl_mpc", env_id)["policy_kwargs"] == load_config("mpail", env_id)["policy_kwargs"]
     configs = tiny_configs(tmp_path)
     irl_mpc = yaml.safe_load((configs / "irl_mpc.yml").read_text())
     irl_mpc["Pendulum-v1"]["n_timesteps"] = 999
