@@ -35,7 +35,6 @@ from imitation.algorithms.adversarial.gail import GAIL
 from imitation.data import rollout, types
 from imitation.rewards.reward_nets import BasicShapedRewardNet, RewardNet
 from imitation.util import logger as imitation_logger
-from imitation.util import networks
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
@@ -443,12 +442,7 @@ def train_adversarial(
         return found
 
     schedule = _EvalSchedule(eval_every, on_eval)
-    for _ in range(max(1, timesteps // trainer.gen_train_timesteps)):
-        trainer.train_gen(trainer.gen_train_timesteps)
-        with networks.training(trainer.reward_train):
-            for _ in range(trainer.n_disc_updates_per_round):
-                trainer.train_disc()
-        schedule(trainer.gen_algo.num_timesteps, predictors)
+    trainer.train(timesteps, callback=lambda _: schedule(trainer.gen_algo.num_timesteps, predictors))
     schedule(trainer.gen_algo.num_timesteps, predictors, force=True)
     return trainer, predictors
 
