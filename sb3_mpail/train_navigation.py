@@ -4,7 +4,7 @@ Train MPAIL on ``sb3_mpail/Navigation-v0`` from observation-only demos, evaluate
 Usage::
 
     python -m sb3_mpail.train_navigation                      # CPU defaults (a few minutes on 2 cores)
-    python -m sb3_mpail.train_navigation --paper-settings     # the paper's N512/H10/J5, 64 envs (GPU)
+    python -m sb3_mpail.train_navigation --device cuda        # the paper's N512/H10/J5, 64 envs, 1M steps
     python -m sb3_mpail.train_navigation --n-samples 64 --timesteps 20000 --out-dir runs/quick
 
 Writes ``<out-dir>/model.zip`` (loadable with ``MPAIL.load``, no demos or env needed), ``<out-dir>/navigation.png``
@@ -200,13 +200,15 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "--n-envs", type=int, default=None, help=f"parallel envs (default {DEFAULT_N_ENVS}; paper {PAPER_N_ENVS})"
     )
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--device", choices=("cpu", "cuda", "auto"), default="cpu")
+    parser.add_argument(
+        "--device", choices=("cpu", "cuda", "auto"), default="cpu", help="cuda also switches to --paper-settings"
+    )
     parser.add_argument("--out-dir", default="runs/navigation")
     parser.add_argument(
         "--paper-settings",
         action="store_true",
         help="the paper's N512/H10/J5, 64 envs, 200 steps per env per iteration, discriminator every 3rd iteration "
-        "(meant for a GPU: add --device cuda)",
+        "(implied by --device cuda)",
     )
     planner = parser.add_argument_group("planner overrides (policy_kwargs)")
     for name, kind in POLICY_OPTIONS.items():
@@ -224,8 +226,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 
 
 def settings_from_args(args: argparse.Namespace) -> Dict[str, Any]:
-    """The run's full settings: defaults (or the paper's), then the command-line overrides."""
-    if args.paper_settings:
+    """The run's full settings: the CPU defaults (the paper's with ``--paper-settings`` or ``--device cuda``), then the
+    command-line overrides."""
+    if args.paper_settings or args.device == "cuda":
         timesteps, n_envs = PAPER_TIMESTEPS, PAPER_N_ENVS
         policy_kwargs, algorithm_kwargs = dict(PAPER_POLICY_KWARGS), dict(PAPER_ALGORITHM_KWARGS)
     else:

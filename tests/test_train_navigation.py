@@ -91,6 +91,8 @@ def test_paper_settings_and_overrides():
     paper = settings_from_args(parse_args(["--paper-settings", "--n-iterations", "2"]))
     assert paper["n_envs"] == 64
     assert paper["policy_kwargs"] == dict(n_samples=512, horizon=10, n_iterations=2)
+    on_gpu = settings_from_args(parse_args(["--device", "cuda"]))
+    assert on_gpu["timesteps"] == 1_000_000 and on_gpu["policy_kwargs"]["n_samples"] == 512
     default = settings_from_args(parse_args([]))
     assert default["policy_kwargs"]["n_samples"] < 512
 
