@@ -119,10 +119,9 @@ NOT_DONE = """### Not done
 - **highway-env `parking-v0` / `racetrack-v0`**, **gymnasium-robotics `PointMaze`**, **MuJoCo `Ant`**: not
   started (no env wrapper, demos, config or figures), so there is no optional-dependency extra or
   "what to install" error yet; nothing was trained on them.
-- **Single noisy, partially observed demo on the navigation car**: the discriminator feature map it needs exists
-  (`policy_kwargs=dict(discriminator_features=...)`, demos as features with `demos_are_features=True`), but the
-  closed track, the demo and the cross-track-error benchmark were not built.
-- **MPAIL-OM vs GAIL/AIRL on the same cartpole budget**: not run.
+- **GAIL on the lap scenario** and **MPAIL-OM vs GAIL/AIRL on the same cartpole budget**: not run.
+- The lap's demo comes from a scripted pure-pursuit driver, not an SB3 expert (the paper's demo was driven on the
+  real car); its sensor noise is Gaussian, 0.05 m and 0.05 m/s.
 """
 
 
