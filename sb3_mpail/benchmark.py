@@ -427,7 +427,7 @@ def write_report(
             n_ood = 4 if 4 in demos else demos[0]
             figure = plot_ood(results, algos, n_ood, figures_dir / f"baselines_{name}_ood.png")
             ood = [
-                f"## Navigation out of distribution ({name})",
+                "## Navigation out of distribution" + ("" if timesteps is None else f" ({timesteps} env steps)"),
                 "",
                 f"Agents trained on {n_ood} demos (starts within 1 m of the origin), run deterministically for 100 steps "
                 "from starts uniform in the 40 x 40 m box centred at the origin with uniform heading (env option "
@@ -471,6 +471,7 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     :param argv: command-line arguments
     """
     args = parse_args(argv)
+    th.set_num_threads(args.threads)  # the runs' setting, also quoted in the report
     options = dict(results_dir=args.results_dir, config_dir=args.config_dir, eval_episodes=args.eval_episodes,
                    eval_every=args.eval_every, ood_episodes=args.ood_episodes, timesteps=args.timesteps,
                    threads=args.threads)  # fmt: skip
