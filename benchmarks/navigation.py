@@ -32,6 +32,12 @@ TARGET = 0.9
 
 
 def run_seed(seed: int, args: argparse.Namespace) -> subprocess.Popen:
+    """
+    Starts the main command for one seed, its output going to ``<out-dir>/seed<N>/train.log``.
+
+    :param seed: training seed
+    :param args: this benchmark's command line
+    """
     out_dir = Path(args.out_dir) / f"seed{seed}"
     command = [
         sys.executable, "-W", "ignore", "-m", "sb3_mpail.train_navigation",
@@ -48,7 +54,12 @@ def run_seed(seed: int, args: argparse.Namespace) -> subprocess.Popen:
 
 
 def steps_to_reach(curve: List[Dict[str, float]], target: float = TARGET) -> int | None:
-    """The first evaluated step count at which the normalised score reached ``target`` (``None``: never)."""
+    """
+    The first evaluated step count at which the normalised score reached ``target`` (``None``: never).
+
+    :param curve: a ``results.json`` learning curve
+    :param target: normalised score to reach
+    """
     for point in curve:
         if point["normalized_score"] >= target:
             return int(point["steps"])
@@ -56,6 +67,12 @@ def steps_to_reach(curve: List[Dict[str, float]], target: float = TARGET) -> int
 
 
 def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
+    """
+    Draws the learning curves and returns the BENCHMARKS.md section, from the seeds' ``results.json``.
+
+    :param args: this benchmark's command line
+    :param wall_seconds: the whole benchmark's wall-clock (``None``: not measured, e.g. ``--report-only``)
+    """
     from sb3_mpail.plotting import plot_learning_curves
     from sb3_mpail.train_navigation import demo_reference_returns
 

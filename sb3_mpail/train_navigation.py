@@ -62,13 +62,23 @@ ALGORITHM_OPTIONS = {
 
 
 def demo_reference_returns(path: Path = DEMO_INFO) -> Tuple[float, float]:
-    """The random policy's and the expert's mean returns, from ``demos/navigation.json``."""
+    """
+    The random policy's and the expert's mean returns, from ``demos/navigation.json``.
+
+    :param path: the demos' information file
+    :return: ``(random return, expert return)``
+    """
     info = json.loads(Path(path).read_text())
     return float(info["random_return_mean"]), float(info["expert_return_mean"])
 
 
 def normalized_score(episode_return: float, info_path: Path = DEMO_INFO) -> float:
-    """``(R - random) / (expert - random)``: 0 is the random policy, 1 the expert."""
+    """
+    ``(R - random) / (expert - random)``: 0 is the random policy, 1 the expert.
+
+    :param episode_return: a (mean) episode return ``R``
+    :param info_path: the demos' information file holding the random and expert returns
+    """
     random_return, expert_return = demo_reference_returns(info_path)
     return (episode_return - random_return) / (expert_return - random_return)
 
@@ -111,6 +121,11 @@ def run_episodes(
     """
     Drives ``n_episodes`` full episodes at once (one env each) with ``predict``, carrying each env's plan as state.
 
+    :param model: a trained (or loaded) MPAIL model
+    :param n_episodes: episodes, one env each
+    :param seed: seed of the envs' start draws
+    :param start_region: the env's ``start_region``: ``"default"``, ``"ood"`` or a half-width in metres
+    :param deterministic: execute the plans' first actions instead of sampling around them
     :return: episode returns ``(n,)``, final distances to the goal ``(n,)`` and each episode's observations
         ``(T + 1, 12)``
     """
@@ -137,7 +152,13 @@ def run_episodes(
 
 
 def evaluate(model: MPAIL, n_episodes: int = 10, seed: int = EVAL_SEED_OFFSET) -> Tuple[float, float]:
-    """Mean and std of the deterministic planner's return over ``n_episodes`` (SB3's ``evaluate_policy``)."""
+    """
+    Mean and std of the deterministic planner's return over ``n_episodes`` (SB3's ``evaluate_policy``).
+
+    :param model: the model to evaluate
+    :param n_episodes: evaluation episodes
+    :param seed: seed of the evaluation envs' start draws
+    """
     env = make_vec_env(ENV_ID, n_envs=min(n_episodes, 10), seed=seed)
     mean_return, std_return = evaluate_policy(model, env, n_eval_episodes=n_episodes, deterministic=True)
     env.close()
@@ -149,6 +170,11 @@ class LearningCurveCallback(BaseCallback):
     Every ``eval_freq`` env steps (checked at the end of each rollout), the deterministic planner's mean return over
     ``n_eval_episodes`` and its normalised score; ``curve`` holds ``(env steps, mean return, normalised score)``.
     Evaluation time is kept apart in ``eval_seconds`` so the training wall-clock can be reported without it.
+
+    :param eval_freq: env steps between evaluations
+    :param n_eval_episodes: episodes per evaluation
+    :param seed: seed of the evaluation envs' start draws
+    :param verbose: print each evaluation when positive
     """
 
     def __init__(self, eval_freq: int, n_eval_episodes: int = 10, seed: int = EVAL_SEED_OFFSET, verbose: int = 0):
@@ -169,6 +195,7 @@ class LearningCurveCallback(BaseCallback):
             self.record()
 
     def record(self) -> None:
+        """Evaluates the model now and appends the point to ``curve``."""
         started = time.perf_counter()
         mean_return, _ = evaluate(self.model, self.n_eval_episodes, self.eval_seed)
         self.eval_seconds += time.perf_counter() - started
@@ -187,6 +214,11 @@ def _has_progress_bar_dependencies() -> bool:
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """
+    The command line.
+
+    :param argv: arguments (``None``: ``sys.argv``)
+    """
     parser = argparse.ArgumentParser(
         prog="python -m sb3_mpail.train_navigation",
         description="Train MPAIL on sb3_mpail/Navigation-v0 from observation-only demos, evaluate, save and plot.",
@@ -226,8 +258,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 
 
 def settings_from_args(args: argparse.Namespace) -> Dict[str, Any]:
-    """The run's full settings: the CPU defaults (the paper's with ``--paper-settings`` or ``--device cuda``), then the
-    command-line overrides."""
+    """
+    The run's full settings: the CPU defaults (the paper's with ``--paper-settings`` or ``--device cuda``), then the
+    command-line overrides.
+
+    :param args: the parsed command line (:func:`parse_args`)
+    """
     if args.paper_settings or args.device == "cuda":
         timesteps, n_envs = PAPER_TIMESTEPS, PAPER_N_ENVS
         policy_kwargs, algorithm_kwargs = dict(PAPER_POLICY_KWARGS), dict(PAPER_ALGORITHM_KWARGS)
@@ -245,7 +281,12 @@ def settings_from_args(args: argparse.Namespace) -> Dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
-    """Runs the command; returns what it wrote to ``results.json``."""
+    """
+    Runs the command.
+
+    :param argv: command-line arguments (``None``: ``sys.argv``)
+    :return: what it wrote to ``results.json``
+    """
     args = parse_args(argv)
     if args.threads is not None:
         th.set_num_threads(args.threads)
