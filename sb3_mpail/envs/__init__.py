@@ -29,3 +29,8 @@ if "sb3_mpail/NavigationLap-v0" not in gym.registry:
         entry_point="sb3_mpail.envs.navigation:NavigationEnv",
         max_episode_steps=240,
     )
+
+# highway-env's parking-v0 with a flat observation (ego state + goal); needs the `scenarios` extra, and making it
+# without highway-env raises an ImportError saying what to install.
+if "sb3_mpail/Parking-v0" not in gym.registry:
+    gym.register(id="sb3_mpail/Parking-v0", entry_point="sb3_mpail.envs.highway:FlatParkingEnv")

@@ -150,6 +150,76 @@ class PendulumDynamics(nn.Module):
         return states
 
 
+class ParkingKinematics(nn.Module):
+    """
+    highway-env 1.9.1's ego vehicle on ``sb3_mpail/Parking-v0``'s observation: the car's
+    ``[x/100, y/100, vx/5, vy/5, cos h, sin h]`` followed by the goal's six features, which are held. The car is
+    highway-env's kinematic bicycle, with slip angle ``beta = arctan(tan(delta) / 2)``:
+    ``x' = v cos(h + beta)``, ``y' = v sin(h + beta)``, ``h' = v sin(beta) / (length / 2)``, ``v' = a``, integrated
+    with ``substeps`` Euler steps of ``dt`` during which the action is held (15 Hz simulation, 5 Hz policy). Actions
+    in ``[-1, 1]`` (clipped) map to ``a = max_acceleration * a0`` and ``delta = max_steering * a1``; beyond
+    ``+-max_speed`` the acceleration is limited as highway-env does. The signed speed is decoded from the
+    observation as ``v = velocity_scale * (vx cos h + vy sin h)``. Collisions (which end parking-v0's episodes) are
+    not modelled.
+
+    :param length: vehicle length in metres
+    :param dt: simulation time step in seconds
+    :param substeps: simulation steps per action
+    :param max_acceleration: acceleration in m/s^2 for a normalised action of 1
+    :param max_steering: steering angle in radians for a normalised action of 1
+    :param max_speed: speed limit in m/s, in both directions
+    :param position_scale: the observation's scale of ``x`` and ``y`` (observed ``x / position_scale``)
+    :param velocity_scale: the observation's scale of ``vx`` and ``vy``
+    """
+
+    def __init__(
+        self,
+        length: float = 5.0,
+        dt: float = 1.0 / 15.0,
+        substeps: int = 3,
+        max_acceleration: float = 5.0,
+        max_steering: float = math.pi / 4,
+        max_speed: float = 40.0,
+        position_scale: float = 100.0,
+        velocity_scale: float = 5.0,
+    ):
+        super().__init__()
+        self.length = length
+        self.dt = dt
+        self.substeps = substeps
+        self.max_acceleration = max_acceleration
+        self.max_steering = max_steering
+        self.max_speed = max_speed
+        self.position_scale = position_scale
+        self.velocity_scale = velocity_scale
+
+    def forward(self, states: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        actions = actions.clamp(-1.0, 1.0)
+        acceleration = self.max_acceleration * actions[:, 0]
+        beta = th.atan(0.5 * th.tan(self.max_steering * actions[:, 1]))
+        x = states[:, 0] * self.position_scale
+        y = states[:, 1] * self.position_scale
+        heading = th.atan2(states[:, 5], states[:, 4])
+        speed = self.velocity_scale * (states[:, 2] * states[:, 4] + states[:, 3] * states[:, 5])
+        for _ in range(self.substeps):
+            # highway-env overwrites the held acceleration, so a limit applied in one substep carries to the next
+            acceleration = th.where(speed > self.max_speed, th.minimum(acceleration, self.max_speed - speed), acceleration)
+            acceleration = th.where(speed < -self.max_speed, th.maximum(acceleration, -self.max_speed - speed), acceleration)
+            x = x + speed * th.cos(heading + beta) * self.dt
+            y = y + speed * th.sin(heading + beta) * self.dt
+            heading = heading + speed * th.sin(beta) / (self.length / 2) * self.dt
+            speed = speed + acceleration * self.dt
+        cos_heading, sin_heading = th.cos(heading), th.sin(heading)
+        next_states = states.clone()
+        next_states[:, 0] = x / self.position_scale
+        next_states[:, 1] = y / self.position_scale
+        next_states[:, 2] = speed * cos_heading / self.velocity_scale
+        next_states[:, 3] = speed * sin_heading / self.velocity_scale
+        next_states[:, 4] = cos_heading
+        next_states[:, 5] = sin_heading
+        return next_states
+
+
 class CallableDynamics(nn.Module):
     """
     Wraps a user's plain function ``f(states, actions) -> next_states`` (torch tensors in, tensor out).
@@ -306,6 +376,7 @@ class LearnedDynamics(nn.Module):
 DYNAMICS_MODELS: Dict[str, type] = {
     "bicycle": KinematicBicycle,
     "pendulum": PendulumDynamics,
+    "parking": ParkingKinematics,
     "learned": LearnedDynamics,
 }
 
@@ -313,6 +384,7 @@ DYNAMICS_MODELS: Dict[str, type] = {
 DEFAULT_DYNAMICS: Dict[str, str] = {
     "Pendulum-v1": "pendulum",
     "sb3_mpail/Navigation-v0": "bicycle",
+    "sb3_mpail/Parking-v0": "parking",
 }
 
 DynamicsSpec = Union[str, nn.Module, DynamicsFunction]

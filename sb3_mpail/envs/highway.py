@@ -1,0 +1,84 @@
+"""
+highway-env scenarios for MPAIL. highway-env is an optional dependency (the ``scenarios`` extra); making one of these
+environments without it raises an ImportError that says what to install.
+
+``sb3_mpail/Parking-v0`` is highway-env's ``parking-v0`` with its goal-conditioned dict observation flattened into the
+Box MPAIL plans on: the ego car's ``[x/100, y/100, vx/5, vy/5, cos h, sin h]`` followed by the goal's six features in
+the same units (``achieved_goal`` repeats the ego features and is dropped). Its planning model is
+:class:`sb3_mpail.mppi.dynamics.ParkingKinematics`.
+"""
+
+from typing import Any, Dict, Optional, Tuple
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+PARKING_FEATURES = ["x", "y", "vx", "vy", "cos_h", "sin_h"]
+PARKING_SCALES = [100, 100, 5, 5, 1, 1]
+SCENARIOS_INSTALL_HINT = 'pip install -e ".[scenarios]" (from the repository root) or pip install highway-env==1.9.1'
+
+
+def require_highway_env() -> None:
+    """
+    Imports highway-env, registering its environments with gymnasium.
+
+    :raises ImportError: naming the extra to install when highway-env is missing
+    """
+    try:
+        import highway_env  # noqa: F401
+    except ImportError as error:
+        raise ImportError(f"This scenario needs highway-env, which is not installed: {SCENARIOS_INSTALL_HINT}") from error
+
+
+class FlatParkingEnv(gym.Env):
+    """
+    highway-env's ``parking-v0`` with a flat Box observation: ``[observation, desired_goal]`` of its dict observation,
+    12 values. It holds the highway-env environment instead of wrapping it, so it is no goal env to SB3 (whose
+    ``check_env`` and HER treat any env whose unwrapped core has ``compute_reward`` as one); rewards, terminations
+    (success or crash) and the 100 s time limit (500 steps) are parking-v0's.
+
+    :param config: overrides of ``parking-v0``'s default config; the observation must stay the default one
+    :param render_mode: gymnasium render mode
+    :param dtype: dtype of the observation (``np.float64`` keeps the simulator's values exactly)
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 5}
+
+    def __init__(self, config: Optional[Dict[str, Any]] = None, render_mode: Optional[str] = None, dtype: type = np.float32):
+        require_highway_env()
+        from highway_env.envs.parking_env import ParkingEnv
+
+        self.parking = ParkingEnv(config=config, render_mode=render_mode)
+        self.render_mode = render_mode
+        self.dtype = dtype
+        observation = self.parking.config["observation"]
+        if observation.get("features") != PARKING_FEATURES or list(observation.get("scales", [])) != PARKING_SCALES:
+            raise ValueError(
+                f"sb3_mpail/Parking-v0 keeps parking-v0's observation (features {PARKING_FEATURES}, scales "
+                f"{PARKING_SCALES}), which its planning model decodes; the config asks for {observation}."
+            )
+        # Generous finite bounds (observation units): positions 1 km, speeds 50 m/s (highway-env caps them near 40).
+        high = np.tile([10.0, 10.0, 10.0, 10.0, 1.0, 1.0], 2)
+        self.observation_space = spaces.Box(-high, high, dtype=dtype)
+        self.action_space = self.parking.action_space
+
+    def _flatten(self, observation: Dict[str, np.ndarray]) -> np.ndarray:
+        return np.concatenate((observation["observation"], observation["desired_goal"])).astype(self.dtype)
+
+    def reset(
+        self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None
+    ) -> Tuple[np.ndarray, Dict[str, Any]]:
+        super().reset(seed=seed)
+        observation, info = self.parking.reset(seed=seed, options=options)
+        return self._flatten(observation), info
+
+    def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:
+        observation, reward, terminated, truncated, info = self.parking.step(action)
+        return self._flatten(observation), float(reward), terminated, truncated, info
+
+    def render(self) -> Optional[np.ndarray]:
+        return self.parking.render()
+
+    def close(self) -> None:
+        self.parking.close()

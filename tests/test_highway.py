@@ -1,0 +1,90 @@
+"""highway-env scenarios: the missing-dependency error, the parking env's flat observation and its planning model."""
+
+import math
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+
+import sb3_mpail.envs  # noqa: F401  (registers the environments)
+from sb3_mpail.mppi import DEFAULT_DYNAMICS, ParkingKinematics, make_dynamics
+
+PARKING_ID = "sb3_mpail/Parking-v0"
+
+
+def test_parking_without_highway_env_says_what_to_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, "highway_env", None)  # import highway_env now fails as if it were not installed
+    with pytest.raises(ImportError, match=r'pip install -e "\.\[scenarios\]"'):
+        gym.make(PARKING_ID)
+
+
+def test_parking_model_drives_straight_turns_left_and_holds_the_goal():
+    model = ParkingKinematics()
+    goal = [0.26, 0.14, 0.0, 0.0, 0.0, 1.0]
+    # heading 0 at 10 m/s; the second car also brakes fully and steers fully left
+    states = th.tensor([[0.0, 0.0, 2.0, 0.0, 1.0, 0.0, *goal]] * 2, dtype=th.float64)
+    next_states = model(states, th.tensor([[0.0, 0.0], [-1.0, 1.0]], dtype=th.float64))
+    assert next_states[0, :6].tolist() == pytest.approx([10.0 * 0.2 / 100, 0.0, 2.0, 0.0, 1.0, 0.0])
+    speeds = 10.0 - 5.0 * np.arange(3) / 15  # speed during each of the 3 substeps
+    beta = math.atan(math.tan(math.pi / 4) / 2)
+    heading = speeds.sum() * math.sin(beta) / 2.5 / 15
+    assert math.atan2(next_states[1, 5], next_states[1, 4]) == pytest.approx(heading)
+    assert 5 * math.hypot(next_states[1, 2], next_states[1, 3]) == pytest.approx(10.0 - 5.0 * 3 / 15)
+    assert next_states[1, 1] > 0  # turned left
+    assert next_states[:, 6:].tolist() == [goal, goal]
+
+
+def test_parking_model_limits_the_speed_like_highway_env():
+    model = ParkingKinematics()
+    states = th.zeros(1, 12, dtype=th.float64)
+    states[0, 2], states[0, 4] = 41.0 / 5, 1.0  # 41 m/s, above the 40 m/s limit
+    next_states = model(states, th.tensor([[1.0, 0.0]], dtype=th.float64))
+    # full throttle is replaced by 40 - v in the first substep, which is then held: 41 -> 41 - 3/15
+    assert 5 * next_states[0, 2].item() == pytest.approx(41.0 - 3.0 / 15)
+
+
+def test_parking_model_is_the_default_for_the_parking_env():
+    assert DEFAULT_DYNAMICS[PARKING_ID] == "parking"
+    space = gym.spaces.Box(-np.inf, np.inf, shape=(12,), dtype=np.float32)
+    actions = gym.spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+    assert isinstance(make_dynamics("parking", space, actions), ParkingKinematics)
+
+
+def test_parking_env_passes_check_env():
+    pytest.importorskip("highway_env")
+    from gymnasium.utils.env_checker import check_env as gymnasium_check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = gym.make(PARKING_ID)
+    assert env.observation_space.shape == (12,)
+    sb3_check_env(env)
+    gymnasium_check_env(env.unwrapped)
+
+
+def test_parking_model_predicts_highway_env_on_non_crash_steps():
+    pytest.importorskip("highway_env")
+    env = gym.make(PARKING_ID, dtype=np.float64)
+    model = ParkingKinematics()
+    rng = np.random.default_rng(0)
+    observation, _ = env.reset(seed=0)
+    checked = 0
+    for _ in range(150):
+        action = rng.uniform(-1, 1, size=2).astype(np.float32)
+        with th.no_grad():
+            predicted = model(th.as_tensor(observation[None]), th.as_tensor(action[None], dtype=th.float64))[0].numpy()
+        observation, _, terminated, truncated, info = env.step(action)
+        if not info["crashed"]:
+            np.testing.assert_allclose(predicted, observation, rtol=0, atol=1e-12)
+            checked += 1
+        if terminated or truncated:
+            observation, _ = env.reset()
+    assert checked > 100
+
+
+def test_parking_env_refuses_an_observation_its_model_cannot_decode():
+    pytest.importorskip("highway_env")
+    config = {"observation": {"type": "KinematicsGoal", "features": ["x", "y"], "scales": [100, 100], "normalize": False}}
+    with pytest.raises(ValueError, match="keeps parking-v0's observation"):
+        gym.make(PARKING_ID, config=config)
