@@ -2,6 +2,7 @@
 
 import math
 import sys
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -88,3 +89,16 @@ def test_parking_env_refuses_an_observation_its_model_cannot_decode():
     config = {"observation": {"type": "KinematicsGoal", "features": ["x", "y"], "scales": [100, 100], "normalize": False}}
     with pytest.raises(ValueError, match="keeps parking-v0's observation"):
         gym.make(PARKING_ID, config=config)
+
+
+def test_shipped_parking_demos_end_parked():
+    with np.load(Path(__file__).resolve().parent.parent / "demos" / "parking_4.npz") as data:
+        episodes = np.split(data["obs"], np.cumsum(data["episode_lengths"])[:-1])
+    assert len(episodes) == 4
+    for episode in episodes:
+        assert episode.shape[1] == 12
+        last = episode[-1].astype(np.float64)
+        # parking-v0's success test: weighted L1 distance to the goal, to the power 0.5, below 0.12
+        distance = np.abs(last[:6] - last[6:]) @ np.array([1, 0.3, 0, 0, 0.02, 0.02])
+        assert distance**0.5 < 0.12
+        assert np.abs(episode[0, :2] - episode[0, 6:8]).max() > 0.05  # started more than 5 m from the goal
