@@ -138,8 +138,9 @@ def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
         "",
         f"Settings (the main command's defaults): {first['timesteps']} env steps, {first['n_envs']} envs, planner "
         f"`{first['policy_kwargs']}` (bicycle model), algorithm `{first['algorithm_kwargs']}`, every other setting "
-        "the paper's. Score = (R - random) / (expert - random) with R the deterministic planner's mean return over "
-        f"{first['n_eval_episodes']} evaluation episodes; expert {expert_return:.1f}, random {random_return:.1f} "
+        "the paper's. Score = (R - random) / (expert - random) with R the deterministic planner's mean return "
+        f"({first['n_eval_episodes']} episodes per learning-curve point); expert {expert_return:.1f}, random "
+        f"{random_return:.1f} "
         "(`demos/navigation.json`).",
         "",
         f"**Final normalised score: {scores.mean():.3f} ± {scores.std():.3f}** (mean ± std over {len(scores)} seeds of "

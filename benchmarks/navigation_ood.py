@@ -98,8 +98,8 @@ def plot_ood(per_seed: List[Dict[str, np.ndarray]], seeds: List[int], radius: fl
     left.grid(alpha=0.3)
     left.legend(loc="lower right", fontsize=8)
     left.set_title(
-        f"OOD starts (dots) in the 40 x 40 m box (dashed); paths of seed {seeds[0]}: green ends within {radius:g} m\n"
-        f"of the goal, red does not; dotted circle: {MAX_TRAVEL + radius:g} m, the reach of 100 steps at top speed"
+        f"OOD starts (dots), 40 x 40 m box (dashed); seed {seeds[0]}'s paths: green\nends within {radius:g} m of the goal, "
+        f"red does not; dotted: {MAX_TRAVEL + radius:g} m, 100 steps at top speed"
     )
     for seed, results in zip(seeds, per_seed):
         right.scatter(results["start_distance"], results["final_distance"], s=8, alpha=0.6, label=f"seed {seed}")
