@@ -44,6 +44,18 @@ def test_learn_on_two_envs_counts_exactly_the_requested_steps(demos):
     assert model.num_timesteps == 64
 
 
+def test_a_rollout_cut_short_by_the_budget_trains_the_value_but_not_the_discriminator(demos):
+    model = make_model(demos, discriminator_update_interval=1).learn(16)
+    discriminator = [p.detach().clone() for p in model.policy.discriminator.parameters()]
+    value = [p.detach().clone() for p in model.policy.value_net.parameters()]
+    model.learn(8, reset_num_timesteps=False)  # half a rollout: only the start of the episode
+    assert model.num_timesteps == 24
+    assert all(th.equal(before, after) for before, after in zip(discriminator, model.policy.discriminator.parameters()))
+    assert not all(th.equal(before, after) for before, after in zip(value, model.policy.value_net.parameters()))
+    model.learn(16, reset_num_timesteps=False)  # a whole rollout trains it again
+    assert not all(th.equal(before, after) for before, after in zip(discriminator, model.policy.discriminator.parameters()))
+
+
 def test_predict_returns_actions_of_the_right_shape_inside_the_bounds(demos):
     model = make_model(demos)
     single = np.array([1.0, 0.0, 0.5], np.float32)
