@@ -36,7 +36,7 @@ DEMO_INFO = REPO_ROOT / "demos" / "navigation.json"
 EVAL_SEED_OFFSET = 10_000
 
 #: CPU defaults, tuned to reach near-expert return on 2 CPU cores in minutes (see BENCHMARKS.md, "navigation");
-#: 200 whole iterations of 8 envs x 100 steps, so every update sees whole episodes
+#: 200 iterations of 8 envs x 100 steps
 DEFAULT_TIMESTEPS = 160_000
 DEFAULT_N_ENVS = 8
 DEFAULT_POLICY_KWARGS: Dict[str, Any] = dict(n_samples=256, horizon=10, n_iterations=3)
@@ -294,13 +294,6 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     if args.device == "cuda" and not th.cuda.is_available():
         raise SystemExit("--device cuda was asked for but torch sees no CUDA device; use --device cpu or auto.")
     settings = settings_from_args(args)
-    steps_per_iteration = settings["n_envs"] * settings["algorithm_kwargs"]["n_steps"]
-    if settings["timesteps"] % steps_per_iteration:
-        print(
-            f"note: {settings['timesteps']} env steps is not a whole number of {steps_per_iteration}-step iterations "
-            "(n_envs x n_steps): the last iteration collects only the start of each episode, and its update can lower "
-            "the final score"
-        )
     out_dir = Path(args.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     demos = Path(args.demos)
