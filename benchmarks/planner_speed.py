@@ -302,8 +302,10 @@ def main(argv: Optional[List[str]] = None) -> None:
     if args.training_steps > 0:
         threads = args.threads[0]
         plain, optimised = (run_training(planner, args.training_steps, threads) for planner in ("reference", "sb3-mpail"))
+        from sb3_mpail.train_navigation import DEFAULT_N_ENVS, DEFAULT_POLICY_KWARGS
+
         training = (
-            f"Training wall-clock, `sb3_mpail.train_navigation`'s defaults (8 envs, N=128, H=10, J=2), "
+            f"Training wall-clock, `sb3_mpail.train_navigation`'s defaults ({DEFAULT_N_ENVS} envs, {DEFAULT_POLICY_KWARGS}), "
             f"{args.training_steps} env steps, seed 0, {threads} thread(s): plain planner {plain:.1f} s, "
             f"optimised {optimised:.1f} s ({plain / optimised:.1f}x).\n\n"
         )
