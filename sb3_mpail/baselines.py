@@ -485,15 +485,22 @@ def train_bc(env_id: str, demos: Path | str, seed: int, hyperparams: Dict[str, A
 
 
 class _RolloutEvalCallback(BaseCallback):
-    def __init__(self, schedule: _EvalSchedule):
+    """
+    Evaluates at the end of rollouts, except the last one: that rollout's update comes after it, so the final
+    evaluation is left to the caller, after ``learn`` returns.
+    """
+
+    def __init__(self, schedule: _EvalSchedule, budget: int):
         super().__init__()
         self.schedule = schedule
+        self.budget = budget
 
     def _on_step(self) -> bool:
         return True
 
     def _on_rollout_end(self) -> None:
-        self.schedule(self.num_timesteps, lambda: {"mpail": self.model})
+        if self.num_timesteps < self.budget:
+            self.schedule(self.num_timesteps, lambda: {"mpail": self.model})
 
 
 def train_mpail(
@@ -524,7 +531,7 @@ def train_mpail(
     model = MPAIL(settings.pop("policy", "MlpMPPI"), make_vec_env(env_id, n_envs=n_envs, seed=seed), str(demos), seed=seed,
                   device="cpu", **settings)  # fmt: skip
     schedule = _EvalSchedule(eval_every, on_eval)
-    model.learn(timesteps, callback=_RolloutEvalCallback(schedule))
+    model.learn(timesteps, callback=_RolloutEvalCallback(schedule, timesteps))
     schedule(model.num_timesteps, lambda: {"mpail": model}, force=True)
     return model
 

@@ -130,3 +130,15 @@ def test_adversarial_runs_are_reproducible_from_the_seed(tmp_path):
         runs.setdefault(algo, []).append(th.cat([p.detach().flatten() for p in model.policy.parameters()]))
     assert th.equal(runs["gail"][0], runs["gail"][1])
     assert not th.equal(runs["gail"][0], runs["airl"][0])
+
+
+def test_mpail_s_last_evaluation_sees_the_model_after_its_last_update(tmp_path):
+    hyperparams = load_config("mpail", "Pendulum-v1", tiny_configs(tmp_path))
+    evaluated_values = []
+
+    def on_eval(steps, found):
+        evaluated_values.append([p.detach().clone() for p in found["mpail"].policy.value_net.parameters()])
+
+    model = train_baseline("mpail", "pendulum", DEMO_DIR / "pendulum_4.npz", 0, hyperparams, 32, on_eval, timesteps=64)
+    final_values = list(model.policy.value_net.parameters())
+    assert all(th.equal(evaluated, final) for evaluated, final in zip(evaluated_values[-1], final_values))
