@@ -21,6 +21,7 @@ from stable_baselines3.common.evaluation import evaluate_policy
 
 from benchmarks.report import machine_description, write_section
 from sb3_mpail import MPAIL
+from sb3_mpail.demos import normalised_score
 
 ROOT = Path(__file__).resolve().parent.parent
 DEMOS = ROOT / "demos" / "pendulum_4.npz"
@@ -36,11 +37,6 @@ SETTINGS = dict(
 N_ENVS = 4
 
 
-def normalised_score(mean_return: float) -> float:
-    random_return, expert_return = EXPERT_STATS["random_return_mean"], EXPERT_STATS["expert_return_mean"]
-    return (mean_return - random_return) / (expert_return - random_return)
-
-
 class EvaluationCurve(BaseCallback):
     """Deterministic evaluation of the planner every ``eval_every`` env steps, on fixed evaluation seeds."""
 
@@ -54,7 +50,8 @@ class EvaluationCurve(BaseCallback):
     def evaluate(self) -> float:
         env = make_vec_env("Pendulum-v1", n_envs=self.n_episodes, seed=10_000)
         mean_return, _ = evaluate_policy(self.model, env, n_eval_episodes=self.n_episodes, deterministic=True)
-        self.curve.append({"timesteps": self.num_timesteps, "return": mean_return, "score": normalised_score(mean_return)})
+        score = normalised_score(mean_return, EXPERT_STATS)
+        self.curve.append({"timesteps": self.num_timesteps, "return": mean_return, "score": score})
         return mean_return
 
     def _on_step(self) -> bool:

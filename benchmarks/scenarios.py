@@ -26,6 +26,7 @@ from stable_baselines3.common.evaluation import evaluate_policy
 import sb3_mpail.envs  # noqa: F401  (registers the package's envs)
 from benchmarks.report import machine_description, write_section
 from sb3_mpail import MPAIL
+from sb3_mpail.demos import normalised_score
 from sb3_mpail.envs.lap import lap_metrics
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -39,8 +40,7 @@ def cartpole_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, fl
     eval_env = make_vec_env("sb3_mpail/ContinuousCartPole-v0", n_envs=n_episodes, seed=EVAL_SEED)
     returns, _ = evaluate_policy(model, eval_env, n_eval_episodes=n_episodes, deterministic=True, return_episode_rewards=True)
     mean_return = float(np.mean(returns))
-    random_return, expert_return = stats["random_return_mean"], stats["expert_return_mean"]
-    return {"return": mean_return, "score": (mean_return - random_return) / (expert_return - random_return)}
+    return {"return": mean_return, "score": normalised_score(mean_return, stats)}
 
 
 def cartpole_reference(stats: Dict) -> str:

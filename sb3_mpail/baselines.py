@@ -136,17 +136,6 @@ def expert_stats(env_id: str, demo_dir: Path = DEMO_DIR) -> Dict[str, Any]:
     return json.loads((Path(demo_dir) / f"{env_name_of(env_id)}.json").read_text())
 
 
-def normalised_score(episode_return: float, stats: Dict[str, Any]) -> float:
-    """
-    ``(R - random) / (expert - random)``: 0 is the random policy, 1 the expert.
-
-    :param episode_return: an undiscounted return
-    :param stats: :func:`expert_stats`
-    """
-    random_return, expert_return = stats["random_return_mean"], stats["expert_return_mean"]
-    return float((episode_return - random_return) / (expert_return - random_return))
-
-
 def action_demos_path(path: Path | str) -> Path:
     """
     The action-labelled twin of an observation-only demo file: ``navigation_4.npz`` -> ``navigation_4_actions.npz``.

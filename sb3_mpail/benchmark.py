@@ -35,9 +35,9 @@ from sb3_mpail.baselines import (
     evaluate,
     expert_stats,
     load_config,
-    normalised_score,
     train_baseline,
 )
+from sb3_mpail.demos import normalised_score
 from sb3_mpail.envs.navigation import REWARD_OFFSET
 
 REPO_ROOT = Path(__file__).resolve().parent.parent

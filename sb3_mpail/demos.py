@@ -9,7 +9,7 @@ of shape ``(sum of T_i + 1, obs_dim)`` with ``episode_lengths`` giving each epis
 
 import os
 from pathlib import Path
-from typing import List, NamedTuple, Sequence, Union
+from typing import Any, Dict, List, NamedTuple, Sequence, Union
 
 import numpy as np
 from gymnasium import spaces
@@ -104,3 +104,15 @@ def load_demos(
             rows = np.unique(np.nonzero(~np.isfinite(array))[0])
             raise ValueError(f"Demo {name} contain NaN or infinite values (in {len(rows)} transitions, first at {rows[0]}).")
     return transitions
+
+
+def normalised_score(episode_return: float, reference: Dict[str, Any]) -> float:
+    """
+    ``(R - random) / (expert - random)``: 0 is the random policy, 1 the expert.
+
+    :param episode_return: an undiscounted (mean) episode return ``R``
+    :param reference: a demos information file's contents (``demos/<env>.json``), with ``random_return_mean`` and
+        ``expert_return_mean``
+    """
+    random_return, expert_return = reference["random_return_mean"], reference["expert_return_mean"]
+    return float((episode_return - random_return) / (expert_return - random_return))

@@ -26,6 +26,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
+from sb3_mpail.demos import normalised_score
 from sb3_mpail.mpail import MPAIL
 
 ENV_ID = "sb3_mpail/Navigation-v0"
@@ -80,8 +81,7 @@ def normalized_score(episode_return: float, info_path: Path = DEMO_INFO) -> floa
     :param episode_return: a (mean) episode return ``R``
     :param info_path: the demos' information file holding the random and expert returns
     """
-    random_return, expert_return = demo_reference_returns(info_path)
-    return (episode_return - random_return) / (expert_return - random_return)
+    return normalised_score(episode_return, json.loads(Path(info_path).read_text()))
 
 
 def make_model(
