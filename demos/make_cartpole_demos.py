@@ -30,19 +30,17 @@ import time
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import torch
+from expert_rollouts import evaluate_expert, evaluate_random, record_demos
 from stable_baselines3 import PPO
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.utils import get_linear_fn, set_random_seed
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/ContinuousCartPole-v0)
 
 ENV_ID = "sb3_mpail/ContinuousCartPole-v0"
 N_EVAL_EPISODES = 100
-DEMO_SEED_OFFSET = 1000
 DEFAULT_OUT_DIR = Path(__file__).resolve().parent
 
 
@@ -90,69 +88,6 @@ def train_expert(timesteps: int, seed: int) -> tuple[PPO, float]:
     return model, train_seconds
 
 
-def evaluate_expert(model: PPO, seed: int, n_episodes: int = N_EVAL_EPISODES) -> tuple[float, float]:
-    """Evaluate the deterministic expert on a seeded evaluation environment.
-
-    :param model: The trained PPO expert.
-    :param seed: Seed of the evaluation environment.
-    :param n_episodes: Number of evaluation episodes.
-    :return: Mean and standard deviation of the episode returns.
-    """
-    eval_env = make_vec_env(ENV_ID, n_envs=1, seed=seed)
-    mean, std = evaluate_policy(model, eval_env, n_eval_episodes=n_episodes, deterministic=True)
-    eval_env.close()
-    return float(mean), float(std)
-
-
-def evaluate_random(seed: int, n_episodes: int = N_EVAL_EPISODES) -> tuple[float, float]:
-    """Evaluate a uniform-random policy (``action_space.sample`` with a seeded space).
-
-    :param seed: Seed for the environment's first reset and for the action space.
-    :param n_episodes: Number of evaluation episodes.
-    :return: Mean and standard deviation of the episode returns.
-    """
-    env = gym.make(ENV_ID)
-    env.action_space.seed(seed)
-    returns: list[float] = []
-    for episode in range(n_episodes):
-        # Seed only the first reset; later resets continue the seeded RNG stream
-        env.reset(seed=seed if episode == 0 else None)
-        done, ep_return = False, 0.0
-        while not done:
-            _, reward, terminated, truncated, _ = env.step(env.action_space.sample())
-            ep_return += float(reward)
-            done = terminated or truncated
-        returns.append(ep_return)
-    env.close()
-    return float(np.mean(returns)), float(np.std(returns))
-
-
-def record_demos(model: PPO, n_demos: int) -> tuple[list[np.ndarray], list[float]]:
-    """Record observation-only demonstrations with the deterministic expert.
-
-    :param model: The trained PPO expert.
-    :param n_demos: Number of episodes to record; episode ``i`` uses ``reset(seed=1000 + i)``.
-    :return: Float32 observations per episode, each ``(T_i + 1, 4)``, and the per-demo returns.
-    """
-    env = gym.make(ENV_ID)
-    all_obs: list[np.ndarray] = []
-    demo_returns: list[float] = []
-    for i in range(n_demos):
-        obs, _ = env.reset(seed=DEMO_SEED_OFFSET + i)
-        episode_obs = [obs]
-        done, ep_return = False, 0.0
-        while not done:
-            action, _ = model.predict(obs, deterministic=True)
-            obs, reward, terminated, truncated, _ = env.step(action)
-            episode_obs.append(obs)  # keep the final observation too (T + 1 in total)
-            ep_return += float(reward)
-            done = terminated or truncated
-        all_obs.append(np.asarray(episode_obs, dtype=np.float32))
-        demo_returns.append(ep_return)
-    env.close()
-    return all_obs, demo_returns
-
-
 def main() -> None:
     """Train the expert, evaluate it, record the demos and write the metadata."""
     args = parse_args()
@@ -163,12 +98,12 @@ def main() -> None:
 
     model, train_seconds = train_expert(args.timesteps, args.seed)
     # Distinct seeds for training and evaluation environments
-    expert_mean, expert_std = evaluate_expert(model, seed=args.seed + 1)
-    random_mean, random_std = evaluate_random(seed=args.seed + 2)
+    expert_mean, expert_std = evaluate_expert(model, ENV_ID, seed=args.seed + 1, n_episodes=N_EVAL_EPISODES)
+    random_mean, random_std = evaluate_random(ENV_ID, seed=args.seed + 2, n_episodes=N_EVAL_EPISODES)
     print(f"expert return: {expert_mean:.1f} +/- {expert_std:.1f} ({train_seconds:.0f}s training)")
     print(f"random return: {random_mean:.1f} +/- {random_std:.1f}")
 
-    episodes, demo_returns = record_demos(model, args.n_demos)
+    episodes, demo_returns = record_demos(model, ENV_ID, args.n_demos)
     npz_path = out_dir / f"cartpole_{args.n_demos}.npz"
     lengths = [len(episode) for episode in episodes]
     if len(set(lengths)) == 1:

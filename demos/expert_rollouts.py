@@ -1,0 +1,80 @@
+"""
+Rollouts shared by the demo scripts: scoring an expert and a random policy, and recording an expert's observations.
+
+Imported by ``make_pendulum_demos.py`` and ``make_cartpole_demos.py``, which run from this folder.
+"""
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+
+DEMO_SEED_OFFSET = 1000
+
+
+def evaluate_expert(model: BaseAlgorithm, env_id: str, seed: int, n_episodes: int) -> tuple[float, float]:
+    """Evaluate the deterministic expert on a seeded evaluation environment.
+
+    :param model: The trained expert.
+    :param env_id: Gymnasium id of the environment.
+    :param seed: Seed of the evaluation environment.
+    :param n_episodes: Number of evaluation episodes.
+    :return: Mean and standard deviation of the episode returns.
+    """
+    eval_env = make_vec_env(env_id, n_envs=1, seed=seed)
+    mean, std = evaluate_policy(model, eval_env, n_eval_episodes=n_episodes, deterministic=True)
+    eval_env.close()
+    return float(mean), float(std)
+
+
+def evaluate_random(env_id: str, seed: int, n_episodes: int) -> tuple[float, float]:
+    """Evaluate a uniform-random policy (``action_space.sample`` with a seeded space).
+
+    :param env_id: Gymnasium id of the environment.
+    :param seed: Seed for the environment's first reset and for the action space.
+    :param n_episodes: Number of evaluation episodes.
+    :return: Mean and standard deviation of the episode returns.
+    """
+    env = gym.make(env_id)
+    env.action_space.seed(seed)
+    returns: list[float] = []
+    for episode in range(n_episodes):
+        # Seed only the first reset; later resets continue the seeded RNG stream
+        env.reset(seed=seed if episode == 0 else None)
+        done, ep_return = False, 0.0
+        while not done:
+            _, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+            ep_return += float(reward)
+            done = terminated or truncated
+        returns.append(ep_return)
+    env.close()
+    return float(np.mean(returns)), float(np.std(returns))
+
+
+def record_demos(model: BaseAlgorithm, env_id: str, n_demos: int) -> tuple[list[np.ndarray], list[float]]:
+    """Record observation-only demonstrations with the deterministic expert.
+
+    :param model: The trained expert.
+    :param env_id: Gymnasium id of the environment.
+    :param n_demos: Number of episodes to record; episode ``i`` uses ``reset(seed=1000 + i)``.
+    :return: Float32 observations per episode, each ``(T_i + 1, obs_dim)`` (the final observation kept), and the
+        per-demo returns.
+    """
+    env = gym.make(env_id)
+    all_obs: list[np.ndarray] = []
+    demo_returns: list[float] = []
+    for i in range(n_demos):
+        obs, _ = env.reset(seed=DEMO_SEED_OFFSET + i)
+        episode_obs = [obs]
+        done, ep_return = False, 0.0
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            episode_obs.append(obs)
+            ep_return += float(reward)
+            done = terminated or truncated
+        all_obs.append(np.asarray(episode_obs, dtype=np.float32))
+        demo_returns.append(ep_return)
+    env.close()
+    return all_obs, demo_returns
