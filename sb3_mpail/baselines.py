@@ -4,11 +4,14 @@ built on the ``imitation`` library and Stable-Baselines3:
 
 * ``mpail``: :class:`~sb3_mpail.MPAIL`.
 * ``gail``: imitation's GAIL, PPO generator, state-only discriminator ``d(s, s')`` (MPAIL's discriminator,
-  :func:`~sb3_mpail.mppi.costs.make_transition_discriminator`; dummy zero actions in the demos, never read).
+  :func:`~sb3_mpail.mppi.costs.make_transition_discriminator`; dummy zero actions in the demos, never read). With
+  ``reward_net_kwargs`` ``features=[...]`` it sees only those state dimensions (:class:`FeatureSelectingRewardNet`),
+  and ``demos_are_features: True`` reads demos that hold only them (the lap's).
 * ``airl``: **AIRL (obs-only)**. imitation's AIRL subtracts ``log pi(a_expert | s)`` from its logit, meaningless
   without expert actions, so this is imitation's adversarial trainer with AIRL's shaped state-only reward
   ``f(s, s') = g(s) + gamma h(s') - h(s)`` (``BasicShapedRewardNet``) as the logit, no policy term, PPO generator.
-* ``bc``: imitation's BC. It **uses expert actions**: ``demos/<env>_<n>_actions.npz`` (:func:`make_action_demos`).
+* ``bc``: imitation's BC. It **uses expert actions**: ``demos/<env>_<n>_actions.npz`` (:func:`make_action_demos`;
+  pendulum's and cartpole's recovered exactly from the demos by inverting the env's dynamics).
 * ``irl_mpc``: the GAIL-learned reward and critic deployed through MPAIL's MPPI planner with no further training:
   the GAIL run of ``zoo_configs/gail.yml``, its discriminator as step cost ``log(1 - D(s, s'))`` (the negated GAIL
   reward) and its PPO critic as terminal value. Its env steps are GAIL's.
@@ -29,6 +32,7 @@ import gymnasium as gym
 import numpy as np
 import torch as th
 import yaml
+from gymnasium import spaces
 from imitation.algorithms import bc as imitation_bc
 from imitation.algorithms.adversarial.common import AdversarialTrainer
 from imitation.algorithms.adversarial.gail import GAIL
@@ -46,7 +50,8 @@ from torch.nn.utils.parametrizations import spectral_norm
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
 from sb3_mpail.demos import load_demos
-from sb3_mpail.mppi.costs import make_transition_discriminator
+from sb3_mpail.envs import cartpole
+from sb3_mpail.mppi.costs import FeatureSelection, make_transition_discriminator
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, PendulumDynamics
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -63,13 +68,22 @@ ALGO_LABELS: Dict[str, str] = {
     "irl_mpc": "IRL-MPC (GAIL reward + critic via MPPI)",
 }
 #: short names of the benchmark's environments (the demo files' prefix)
-ENV_NAMES: Dict[str, str] = {"sb3_mpail/Navigation-v0": "navigation", "Pendulum-v1": "pendulum"}
+ENV_NAMES: Dict[str, str] = {
+    "sb3_mpail/Navigation-v0": "navigation",
+    "Pendulum-v1": "pendulum",
+    "sb3_mpail/ContinuousCartPole-v0": "cartpole",
+    "sb3_mpail/NavigationLap-v0": "lap",
+}
 #: keys of a config entry that are strings of Python expressions (rl_zoo3 evaluates ``policy_kwargs`` this way)
 EXPRESSION_KEYS = ("policy_kwargs", "reward_net_kwargs")
 #: keys of a config entry that describe the run rather than the algorithm
 META_KEYS = ("n_timesteps", "n_envs", "demos")
-#: keys of ``gail.yml``/``airl.yml`` for the adversarial trainer; the others go to PPO
-ADVERSARIAL_KEYS = ("demo_batch_size", "n_disc_updates_per_round", "disc_learning_rate", "disc_betas", "reward_net_kwargs")
+#: keys of ``gail.yml``/``airl.yml`` for the adversarial trainer; the others go to PPO. ``allow_variable_horizon``:
+#: generator episodes may end early (cartpole's falls), which imitation refuses by default
+ADVERSARIAL_KEYS = (
+    "demo_batch_size", "n_disc_updates_per_round", "disc_learning_rate", "disc_betas", "reward_net_kwargs",
+    "allow_variable_horizon", "demos_are_features",
+)  # fmt: skip
 
 #: ``on_eval(env_steps, {algo: predictor})``: called during training with anything SB3's ``predict`` works on
 EvalHook = Callable[[int, Dict[str, Any]], None]
@@ -146,19 +160,32 @@ def action_demos_path(path: Path | str) -> Path:
     return path.with_name(f"{path.stem}_actions{path.suffix}")
 
 
-def observation_only_transitions(path: Path | str, env: VecEnv) -> types.Transitions:
+def observation_only_transitions(
+    path: Path | str, env: VecEnv, feature_indices: Optional[Sequence[int]] = None
+) -> types.Transitions:
     """
     The demos as imitation ``Transitions`` for a state-only discriminator: real ``(s, s')``, dummy zero actions
     (imitation requires ``acts``; the reward nets here never read them).
 
     :param path: observation-only ``.npz`` demos
     :param env: the training env (its spaces check the demos)
+    :param feature_indices: the demos hold only these state dimensions: they are written there into otherwise zero
+        states, since imitation batches demo and agent states together; the discriminator must then read only those
+        dimensions (:class:`FeatureSelectingRewardNet`)
     """
-    pairs = load_demos(path, env.observation_space)
-    n = len(pairs.observations)
+    if feature_indices is None:
+        pairs = load_demos(path, env.observation_space)
+        observations, next_observations = pairs.observations, pairs.next_observations
+    else:
+        indices = list(feature_indices)
+        pairs = load_demos(path, spaces.Box(-np.inf, np.inf, (len(indices),), np.float32), "the discriminator's features")
+        observations, next_observations = (np.zeros((len(pairs.observations), *env.observation_space.shape), np.float32)
+                                           for _ in range(2))  # fmt: skip
+        observations[:, indices], next_observations[:, indices] = pairs.observations, pairs.next_observations
+    n = len(observations)
     return types.Transitions(
-        obs=pairs.observations, acts=np.zeros((n, *env.action_space.shape), np.float32), infos=np.array([{}] * n),
-        next_obs=pairs.next_observations, dones=np.zeros(n, dtype=bool),
+        obs=observations, acts=np.zeros((n, *env.action_space.shape), np.float32), infos=np.array([{}] * n),
+        next_obs=next_observations, dones=np.zeros(n, dtype=bool),
     )  # fmt: skip
 
 
@@ -285,6 +312,53 @@ class ObsOnlyAIRL(AdversarialTrainer):
         return self._reward_net.base
 
 
+class FeatureSelectingRewardNet(RewardNet):
+    """
+    A reward net that reads only some dimensions of ``s`` and ``s'``: MPAIL's ``discriminator_features=[...]`` for
+    GAIL. Its discriminator is :func:`~sb3_mpail.mppi.costs.make_transition_discriminator` built on those dimensions.
+
+    :param observation_space: the env's observation space
+    :param action_space: the env's action space (never read)
+    :param feature_indices: the state dimensions the discriminator sees, in this order
+    :param hid_sizes: hidden widths
+    :param use_spectral_norm: spectral normalisation on every linear layer
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Box,
+        action_space: spaces.Box,
+        feature_indices: Sequence[int],
+        hid_sizes: Sequence[int] = (32, 32),
+        use_spectral_norm: bool = True,
+    ):
+        super().__init__(observation_space, action_space)
+        self.features = FeatureSelection(feature_indices)
+        feature_space = spaces.Box(-np.inf, np.inf, (len(feature_indices),), np.float32)
+        self.discriminator = make_transition_discriminator(feature_space, action_space, hid_sizes, use_spectral_norm)
+
+    def forward(self, state: th.Tensor, action: th.Tensor, next_state: th.Tensor, done: th.Tensor) -> th.Tensor:
+        return self.discriminator(self.features(state), action, self.features(next_state), done)
+
+
+def make_gail_discriminator(
+    observation_space: spaces.Box, action_space: spaces.Box, net_kwargs: Optional[Dict[str, Any]] = None
+) -> RewardNet:
+    """
+    GAIL's state-only discriminator ``d(s, s')``, on every state dimension or, with ``features``, on those only.
+
+    :param observation_space: the env's observation space
+    :param action_space: the env's action space (never read)
+    :param net_kwargs: ``reward_net_kwargs``: ``hid_sizes`` (default ``(32, 32)``), ``spectral_norm`` (default on),
+        ``features`` (state indices; default all)
+    """
+    net_kwargs = net_kwargs or {}
+    hid_sizes, use_spectral_norm = net_kwargs.get("hid_sizes", (32, 32)), net_kwargs.get("spectral_norm", True)
+    if net_kwargs.get("features") is None:
+        return make_transition_discriminator(observation_space, action_space, hid_sizes, use_spectral_norm)
+    return FeatureSelectingRewardNet(observation_space, action_space, net_kwargs["features"], hid_sizes, use_spectral_norm)
+
+
 def make_adversarial(algo: str, env: VecEnv, demos: Path | str, seed: int, hyperparams: Dict[str, Any]) -> AdversarialTrainer:
     """
     A GAIL or AIRL (obs-only) trainer with a PPO generator.
@@ -295,18 +369,22 @@ def make_adversarial(algo: str, env: VecEnv, demos: Path | str, seed: int, hyper
     :param seed: PPO's seed
     :param hyperparams: the config entry without :data:`META_KEYS`; keys other than :data:`ADVERSARIAL_KEYS` go to PPO
     """
+    net_kwargs = dict(hyperparams.get("reward_net_kwargs") or {})
+    if net_kwargs.get("features") is not None and algo != "gail":
+        raise ValueError("Only GAIL's discriminator can read a subset of the state (reward_net_kwargs features).")
+    if hyperparams.get("demos_are_features") and net_kwargs.get("features") is None:
+        raise ValueError("demos_are_features needs reward_net_kwargs features: the state dimensions the demos hold.")
+    demo_features = net_kwargs["features"] if hyperparams.get("demos_are_features") else None
+    transitions = observation_only_transitions(demos, env, demo_features)
     ppo_kwargs = {key: value for key, value in hyperparams.items() if key not in ADVERSARIAL_KEYS}
     generator = PPO(ppo_kwargs.pop("policy", "MlpPolicy"), env, seed=seed, device="cpu", verbose=0, **ppo_kwargs)
-    transitions = observation_only_transitions(demos, env)
-    net_kwargs = dict(hyperparams.get("reward_net_kwargs") or {})
-    hid_sizes, use_spectral_norm = net_kwargs.get("hid_sizes", (32, 32)), net_kwargs.get("spectral_norm", True)
     if algo == "gail":
         trainer_class: type = GAIL
-        reward_net: RewardNet = make_transition_discriminator(env.observation_space, env.action_space, hid_sizes,
-                                                              use_spectral_norm)  # fmt: skip
+        reward_net = make_gail_discriminator(env.observation_space, env.action_space, net_kwargs)
     else:
         trainer_class = ObsOnlyAIRL
-        reward_net = state_only_airl_reward(env, hid_sizes, generator.gamma, use_spectral_norm)
+        reward_net = state_only_airl_reward(env, net_kwargs.get("hid_sizes", (32, 32)), generator.gamma,
+                                            net_kwargs.get("spectral_norm", True))  # fmt: skip
     return trainer_class(
         demonstrations=transitions,
         demo_batch_size=min(int(hyperparams.get("demo_batch_size", 256)), len(transitions)),
@@ -317,7 +395,7 @@ def make_adversarial(algo: str, env: VecEnv, demos: Path | str, seed: int, hyper
         disc_opt_kwargs=dict(lr=float(hyperparams.get("disc_learning_rate", 3e-4)),
                              betas=tuple(hyperparams.get("disc_betas", (0.5, 0.999)))),
         custom_logger=_quiet_logger(),
-        allow_variable_horizon=False,
+        allow_variable_horizon=bool(hyperparams.get("allow_variable_horizon", False)),
     )  # fmt: skip
 
 
@@ -368,13 +446,8 @@ def irl_mpc_policy(trainer: GAIL, env_id: str, hyperparams: Dict[str, Any]) -> n
     value = hyperparams.get("value", "gail_critic")
     if value not in ("gail_critic", "none"):
         raise ValueError(f"irl_mpc value must be 'gail_critic' or 'none', got {value!r}.")
-    net_kwargs = dict(hyperparams["gail"].get("reward_net_kwargs") or {})
-    discriminator = make_transition_discriminator(
-        trainer.venv.observation_space,
-        trainer.venv.action_space,
-        net_kwargs.get("hid_sizes", (32, 32)),
-        net_kwargs.get("spectral_norm", True),
-    )
+    discriminator = make_gail_discriminator(trainer.venv.observation_space, trainer.venv.action_space,
+                                            hyperparams["gail"].get("reward_net_kwargs"))  # fmt: skip
     discriminator.load_state_dict(trainer._reward_net.state_dict())  # copies: evaluating must not touch GAIL's nets
     generator = trainer.gen_algo.policy
     critic = type(generator)(**generator._get_constructor_parameters())  # as SB3's BasePolicy.load rebuilds a policy
@@ -606,17 +679,45 @@ def pendulum_actions(observations: np.ndarray, gravity: float = 10.0) -> np.ndar
     return (acceleration * p.mass * p.length**2 / 3).astype(np.float32)[:, None]
 
 
+def cartpole_actions(observations: np.ndarray) -> np.ndarray:
+    """
+    The normalised forces that produced a ``sb3_mpail/ContinuousCartPole-v0`` episode, recovered exactly from
+    consecutive observations by solving the env's pole equation for the force ``F``:
+    ``theta_acc = (g sin th - cos th temp) / (l (4/3 - m_pole cos^2 th / M))``, ``temp = (F + m_pole l thdot^2 sin th) / M``,
+    ``theta_acc = (thdot' - thdot) / tau``.
+
+    :param observations: ``(T + 1, 4)`` observations ``(x, x_dot, theta, theta_dot)``
+    :return: ``(T, 1)`` actions ``F / 10 N``
+    """
+    obs = np.asarray(observations, np.float64)
+    theta, theta_dot = obs[:-1, 2], obs[:-1, 3]
+    theta_acc = (obs[1:, 3] - theta_dot) / cartpole.TAU
+    cos_theta, sin_theta = np.cos(theta), np.sin(theta)
+    temp = (cartpole.GRAVITY * sin_theta - theta_acc * cartpole.HALF_LENGTH
+            * (4.0 / 3.0 - cartpole.MASS_POLE * cos_theta**2 / cartpole.TOTAL_MASS)) / cos_theta  # fmt: skip
+    force = temp * cartpole.TOTAL_MASS - cartpole.POLE_MASS_LENGTH * theta_dot**2 * sin_theta
+    return (force / cartpole.FORCE_MAG).astype(np.float32)[:, None]
+
+
+#: per env, the actions recovered from an episode's observations and the exact model that checks them step by step
+INVERSE_DYNAMICS: Dict[str, Tuple[Callable[[np.ndarray], np.ndarray], Callable[[th.Tensor, th.Tensor], th.Tensor]]] = {
+    "pendulum": (pendulum_actions, PendulumDynamics()),
+    "cartpole": (cartpole_actions, cartpole.cartpole_dynamics),
+}
+
+
 def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Path = DEMO_DIR) -> List[Path]:
     """
     Writes ``<env>_<n>_actions.npz`` (``obs`` and the expert's ``acts``) beside each shipped ``<env>_<n>.npz``, after
     checking that the actions reproduce the shipped observations.
 
     Navigation: replays the PPO expert that ``demos/make_navigation_demos.py`` saved (``expert_path``; rerunning that
-    script retrains the same expert bit for bit on this stack) from the demos' start seeds. Pendulum: the torques are
-    recovered from the shipped observations by inverting the pendulum's known dynamics (:func:`pendulum_actions`),
-    so no expert is needed; every step is checked against the exact model.
+    script retrains the same expert bit for bit on this stack) from the demos' start seeds. Pendulum and cartpole:
+    the actions are recovered from the shipped observations by inverting the env's known dynamics
+    (:func:`pendulum_actions`, :func:`cartpole_actions`), so no expert is needed; every step is checked against the
+    exact model.
 
-    :param env: ``navigation`` or ``pendulum``
+    :param env: ``navigation``, ``pendulum`` or ``cartpole``
     :param expert_path: the navigation expert
     :param out_dir: folder of the shipped demos, where the files go
     :raises RuntimeError: the actions do not reproduce a shipped demo
@@ -633,12 +734,13 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
         expert = script.make_expert_policy(PPO.load(expert_path or "/tmp/navigation_expert_ppo.zip", device="cpu"), gym_env)
         replays = [_replay(gym_env, expert, script.DEMO_SEED_BASE + i, demos.shape[1] - 1) for i in range(len(demos))]
         reproduced, actions = np.stack([obs for obs, _ in replays]), np.stack([acts for _, acts in replays])
-    elif name == "pendulum":
-        # the pendulum is unstable upright, so float32 torques replayed open loop drift: check each step instead
-        actions = np.stack([pendulum_actions(observations) for observations in demos])
-        states, torques = th.as_tensor(demos[:, :-1]).reshape(-1, 3), th.as_tensor(actions).reshape(-1, 1)
-        next_states = PendulumDynamics()(states, torques).reshape(demos[:, 1:].shape).numpy()
-        reproduced = np.concatenate([demos[:, :1], next_states], axis=1)
+    elif name in INVERSE_DYNAMICS:
+        # both are unstable upright, so float32 actions replayed open loop drift: check each step instead
+        recover, model = INVERSE_DYNAMICS[name]
+        actions = np.stack([recover(observations) for observations in demos])
+        states = th.as_tensor(demos[:, :-1]).reshape(-1, demos.shape[-1])
+        next_states = model(states, th.as_tensor(actions).reshape(-1, actions.shape[-1])).reshape(demos[:, 1:].shape)
+        reproduced = np.concatenate([demos[:, :1], next_states.numpy()], axis=1)
     else:
         raise ValueError(f"No action labels known for {env!r}.")
     if not np.allclose(reproduced, demos, atol=1e-4):

@@ -3,6 +3,8 @@ The benchmark grid: MPAIL against GAIL, AIRL (obs-only), BC (uses expert actions
 env-step budget (``zoo_configs/<algo>.yml``), over envs x demo counts x seeds.
 
     python -m sb3_mpail.benchmark --envs navigation pendulum --algos mpail gail airl bc irl_mpc --demos 1 4 16 --seeds 5
+    python -m sb3_mpail.benchmark --envs cartpole --algos mpail gail airl --demos 4 --seeds 3
+    python -m sb3_mpail.benchmark --envs lap --algos gail --demos 1 --seeds 3
 
 Each finished run writes ``<results-dir>/<env>/<algo>_<n>demos_seed<s>.json`` (its learning curve, final score and,
 on navigation, its out-of-distribution episodes); a rerun skips the runs whose file exists, so an interrupted grid
@@ -10,6 +12,10 @@ resumes where it stopped. GAIL and IRL-MPC of the same env, demo count and seed 
 deploys that run's reward and critic). Runs go to ``--workers`` local processes, or to a Ray cluster with
 ``--ray-address`` (``pip install ray``). At the end, the tables of every result found go into BENCHMARKS.md
 (normalised score mean and 95% CI, env steps to reach 0.9) and the figures into ``benchmarks/figures/``.
+
+The lap (``sb3_mpail/NavigationLap-v0``, one noisy demo of position and body-frame velocity) has no expert return:
+its runs are measured as ``benchmarks/scenarios.py`` measures MPAIL's, by the cross-track error to the demo's path
+(mean and max over 5 laps) and the mean speed, and its table sets them beside MPAIL's scenario figures.
 """
 
 import argparse
@@ -25,6 +31,8 @@ import numpy as np
 import torch as th
 
 from benchmarks.report import BENCHMARKS_FILE, machine_description, write_section
+from benchmarks.scenarios import RESULTS as SCENARIO_RESULTS
+from benchmarks.scenarios import SCENARIOS, lap_figures
 from sb3_mpail.baselines import (
     ALGO_LABELS,
     ALGOS,
@@ -50,6 +58,9 @@ EVAL_SEED, OOD_SEED = 10_000, 50_000
 #: an OOD episode "reaches the goal" when it ends within this distance of it (metres)
 GOAL_RADIUS = 2.0
 NAVIGATION = "sb3_mpail/Navigation-v0"
+LAP = "sb3_mpail/NavigationLap-v0"
+#: the lap's figures, in the order of its curve points after the env-step count
+LAP_FIGURES = ("cte_mean", "cte_max", "speed")
 
 
 def grid_name(env_id: str, timesteps: Optional[int] = None) -> str:
@@ -110,6 +121,24 @@ def job_paths(job: Dict[str, Any], options: Dict[str, Any]) -> Dict[str, Path]:
     }
 
 
+def curve_point(predictor: Any, env_id: str, steps: int, n_episodes: int, stats: Dict[str, Any]) -> Tuple[float, ...]:
+    """
+    One learning-curve point: ``(env steps, normalised score, mean return)`` over ``n_episodes`` deterministic
+    episodes, or on the lap ``(env steps, cte_mean, cte_max, speed)`` over the laps MPAIL's scenario is measured on.
+
+    :param predictor: anything SB3's ``predict`` works on
+    :param env_id: gymnasium id
+    :param steps: env steps trained so far
+    :param n_episodes: evaluation episodes (not the lap's: its lap count is the scenario's)
+    :param stats: :func:`~sb3_mpail.baselines.expert_stats`
+    """
+    if env_id == LAP:
+        figures = lap_figures(predictor, stats, SCENARIOS["lap"].n_eval_episodes)
+        return (steps, *(figures[key] for key in LAP_FIGURES))
+    mean_return = float(np.mean([np.sum(t.rews) for t in evaluate(predictor, env_id, n_episodes, EVAL_SEED)]))
+    return steps, normalised_score(mean_return, stats), mean_return
+
+
 def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
     """
     Trains one job and writes each of its algorithms' result file; skips it when all exist.
@@ -129,15 +158,13 @@ def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
     budget = hyperparams["n_timesteps"] if options["timesteps"] is None else options["timesteps"]
     eval_every = options["eval_every"] or max(1, budget // 10)
     stats = expert_stats(env_id)
-    curves: Dict[str, List[Tuple[int, float, float]]] = {name: [] for name in algos}
+    curves: Dict[str, List[Tuple[float, ...]]] = {name: [] for name in algos}
     finals: Dict[str, Any] = {}
 
     def on_eval(steps: int, predictors: Dict[str, Any]) -> None:
         for name, predictor in predictors.items():
             if name in curves:
-                mean_return = float(np.mean([np.sum(t.rews) for t in evaluate(predictor, env_id, options["eval_episodes"],
-                                                                               EVAL_SEED)]))  # fmt: skip
-                curves[name].append((steps, normalised_score(mean_return, stats), mean_return))
+                curves[name].append(curve_point(predictor, env_id, steps, options["eval_episodes"], stats))
                 finals[name] = predictor
 
     start = time.perf_counter()
@@ -147,10 +174,13 @@ def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
     for name, path in paths.items():
         result: Dict[str, Any] = dict(
             env_id=env_id, algo=name, n_demos=n_demos, seed=seed, n_timesteps=budget, curve=curves[name],
-            final_score=curves[name][-1][1], final_return=curves[name][-1][2],
-            steps_to_target=next((steps for steps, score, _ in curves[name] if score >= TARGET), None),
             train_seconds=round(seconds, 1), shared_run=list(algos), hyperparams=hyperparams,
         )  # fmt: skip
+        if env_id == LAP:
+            result["lap"] = dict(zip(LAP_FIGURES, curves[name][-1][1:]))
+        else:
+            result.update(final_score=curves[name][-1][1], final_return=curves[name][-1][2],
+                          steps_to_target=next((point[0] for point in curves[name] if point[1] >= TARGET), None))  # fmt: skip
         if env_id == NAVIGATION and options["ood_episodes"] > 0:
             trajectories = evaluate(finals[name], env_id, options["ood_episodes"], OOD_SEED, dict(start_region="ood"))
             final_rewards = np.array([t.rews[-1] for t in trajectories])
@@ -288,6 +318,45 @@ def ood_table(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int)
     return "\n".join(lines)
 
 
+def lap_table(
+    results: List[Dict[str, Any]], algos: Sequence[str], demos: Sequence[int], n_seeds: int, scenario_mpail: bool = True
+) -> str:
+    """
+    The lap's markdown table: per algorithm and demo count, the cross-track error to the demo's path (mean and max
+    over the laps) and the mean speed, per seed and as mean ± std over seeds.
+
+    :param results: :func:`load_results` of the lap grid
+    :param algos: rows
+    :param demos: demo counts
+    :param n_seeds: seeds asked for (cells with fewer are marked incomplete)
+    :param scenario_mpail: when the grid has no MPAIL runs, add MPAIL's from ``benchmarks/scenarios.py``'s lap run
+        (same laps, same measure, ``zoo_configs/mpail.yml``'s budget); so not for grids with ``--timesteps``
+    """
+    lines = ["| algorithm | demos | seeds | mean cross-track error (m) | max cross-track error (m) | speed (m/s) | source |",
+             "|---|---|---|---|---|---|---|"]  # fmt: skip
+    rows: List[Tuple[str, int, str, List[Dict[str, float]], str]] = []
+    for algo in algos:
+        for n_demos in demos:
+            runs = sorted((r for r in results if r["algo"] == algo and r["n_demos"] == n_demos), key=lambda r: r["seed"])
+            done = f"{len(runs)}/{n_seeds}" + ("" if len(runs) >= n_seeds else " **incomplete**")
+            rows.append((ALGO_LABELS[algo], n_demos, done, [run["lap"] for run in runs], "this grid"))
+    if scenario_mpail and not any(r["algo"] == "mpail" for r in results) and SCENARIO_RESULTS.exists():
+        scenario = json.loads(SCENARIO_RESULTS.read_text()).get("lap")
+        if scenario is not None:
+            runs = sorted(scenario["runs"], key=lambda run: run["seed"])
+            rows.insert(0, (ALGO_LABELS["mpail"], 1, str(len(runs)), runs, f"`{scenario['command']}`"))
+    for label, n_demos, done, figures, source in rows:
+        if not figures:
+            lines.append(f"| {label} | {n_demos} | {done} | not run | not run | not run | {source} |")
+            continue
+        cells = []
+        for key in LAP_FIGURES:
+            values = [run[key] for run in figures]
+            cells.append(f"**{np.mean(values):.3f} ± {np.std(values):.3f}** ({', '.join(f'{v:.3f}' for v in values)})")
+        lines.append(f"| {label} | {n_demos} | {done} | {' | '.join(cells)} | {source} |")
+    return "\n".join(lines)
+
+
 def plot_curves(results: List[Dict[str, Any]], env_id: str, n_demos: int, path: Path) -> Optional[Path]:
     """
     Normalised score against env steps per algorithm: the mean over seeds and a band of ± one standard deviation
@@ -397,6 +466,10 @@ def write_report(
         env_id = env_id_of(env)
         name, stats = grid_name(env_id, timesteps), expert_stats(env_id)
         results = load_results(results_dir, name)
+        if env_id == LAP:
+            section = lap_report(results, stats, algos, demos, n_seeds, command, scenario_mpail=timesteps is None)
+            write_section(f"baselines-{name}", section, report_file)
+            continue
         budgets = {algo: sorted({r["n_timesteps"] for r in results if r["algo"] == algo}) for algo in algos}
         figures = [plot_curves(results, env_id, n, figures_dir / f"baselines_{name}_{n}demos.png") for n in demos]
         lines = [
@@ -441,6 +514,46 @@ def write_report(
                 ood.append(f"![final positions](benchmarks/figures/{figure.name})")
             ood += ["", f"Command: `{command}`."]
             write_section(f"baselines-{name}-ood", "\n".join(ood), report_file)
+
+
+def lap_report(
+    results: List[Dict[str, Any]],
+    stats: Dict[str, Any],
+    algos: Sequence[str],
+    demos: Sequence[int],
+    n_seeds: int,
+    command: str,
+    scenario_mpail: bool = True,
+) -> str:
+    """
+    The lap's BENCHMARKS.md section: :func:`lap_table` with the budgets, the demo's driver and the command.
+
+    :param results: :func:`load_results` of the lap grid
+    :param stats: ``demos/lap.json``
+    :param algos: table rows
+    :param demos: demo counts
+    :param n_seeds: seeds asked for
+    :param command: the command line to quote
+    :param scenario_mpail: :func:`lap_table`'s
+    """
+    budgets = sorted({r["n_timesteps"] for r in results})
+    driver = stats["driver_on_eval_laps"]
+    return "\n".join([
+        f"## Baselines on {LAP}: MPAIL vs GAIL on one lap from a single noisy partial demo",
+        "",
+        "The demo holds only x, y and the body-frame velocity (0.05 m / 0.05 m/s sensor noise); every discriminator "
+        "sees only those 4 dimensions of s and s' (GAIL: reward_net_kwargs `features=[0, 1, 6, 7]`, PPO generator on "
+        "the full state). Deterministic agent after the budget ("
+        + "/".join(map(str, budgets or ["-"]))
+        + f" env steps), driven for {SCENARIOS['lap'].n_eval_episodes} laps (reset seeds {EVAL_SEED}+, the laps "
+        "`benchmarks/scenarios.py` measures MPAIL on); cross-track error to the demo's recorded path over every step "
+        "of every lap, mean planar speed. Mean ± std over seeds (per seed in brackets). The demo's driver on the same "
+        f"laps: {driver['cte_mean']:.3f} m mean, {driver['cte_max']:.3f} m max, {driver['speed']:.2f} m/s.",
+        "",
+        lap_table(results, algos, demos, n_seeds, scenario_mpail),
+        "",
+        f"Command: `{command}` on {machine_description()}.",
+    ])  # fmt: skip
 
 
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:

@@ -6,7 +6,9 @@ import pytest
 from test_baselines import tiny_configs
 
 from sb3_mpail import benchmark
+from sb3_mpail.baselines import DEMO_DIR
 from sb3_mpail.benchmark import main, make_jobs, mean_ci, steps_summary
+from sb3_mpail.demos import normalised_score
 
 
 def test_gail_and_irl_mpc_share_a_run_and_seeds_come_first():
@@ -80,3 +82,31 @@ def test_ray_is_optional_and_named_when_missing(tmp_path, monkeypatch):
     job = dict(env_id="Pendulum-v1", algos=("bc",), n_demos=4, seed=0)
     with pytest.raises(SystemExit, match="pip install"):
         benchmark.run_grid([job], dict(results_dir=tmp_path, threads=1), ray_address="auto")
+
+
+def test_cartpole_runs_are_scored_against_its_expert_and_random_returns(tmp_path):
+    results, report = tmp_path / "results", tmp_path / "BENCHMARKS.md"
+    main(["--envs", "cartpole", "--algos", "gail", "--demos", "4", "--seeds", "1", "--config-dir",
+          str(tiny_configs(tmp_path / "configs")), "--results-dir", str(results), "--report-file", str(report),
+          "--figures-dir", str(tmp_path / "figures"), "--eval-episodes", "2"])  # fmt: skip
+    gail = json.loads((results / "cartpole" / "gail_4demos_seed0.json").read_text())
+    stats = json.loads((DEMO_DIR / "cartpole.json").read_text())
+    assert gail["final_score"] == pytest.approx(normalised_score(gail["final_return"], stats))
+    assert "## Baselines on sb3_mpail/ContinuousCartPole-v0" in report.read_text()
+
+
+def test_lap_runs_are_measured_by_cross_track_error_beside_mpail_s_scenario_runs(tmp_path, monkeypatch):
+    mpail_runs = [dict(seed=seed, cte_mean=0.3, cte_max=2.0 + seed, speed=1.0, seconds=1.0) for seed in range(2)]
+    scenarios = tmp_path / "scenarios.json"
+    scenarios.write_text(json.dumps(dict(lap=dict(runs=mpail_runs, command="python -m benchmarks.scenarios lap"))))
+    monkeypatch.setattr(benchmark, "SCENARIO_RESULTS", scenarios)
+    results, report = tmp_path / "results", tmp_path / "BENCHMARKS.md"
+    main(["--envs", "lap", "--algos", "gail", "--demos", "1", "--seeds", "1", "--config-dir",
+          str(tiny_configs(tmp_path / "configs")), "--results-dir", str(results), "--report-file", str(report),
+          "--figures-dir", str(tmp_path / "figures")])  # fmt: skip
+    gail = json.loads((results / "lap" / "gail_1demos_seed0.json").read_text())
+    assert set(gail["lap"]) == {"cte_mean", "cte_max", "speed"} and "final_score" not in gail
+    assert gail["lap"]["cte_mean"] <= gail["lap"]["cte_max"] and gail["curve"][-1][0] == 64
+    text = report.read_text()
+    assert "| MPAIL | 1 | 2 | **0.300 ± 0.000** (0.300, 0.300) | **2.500 ± 0.500** (2.000, 3.000) |" in text
+    assert "| GAIL (state-only) | 1 | 1/1 |" in text and "`python -m benchmarks.scenarios lap`" in text
