@@ -106,9 +106,11 @@ def test_other_network_shapes_match_the_reference(network_kwargs):
     assert_same_plans(*plan_both_ways(policy, navigation_states(2)))
 
 
-def test_cache_sized_chunks_match_the_reference(monkeypatch):
-    # chunks smaller than one env's samples exercise the chunk copies and the partial last chunk
-    monkeypatch.setattr(fused, "CHUNK_ROWS", 700)
+@pytest.mark.parametrize("chunk_rows", [250, 700, 2000])
+def test_cache_sized_chunks_match_the_reference(monkeypatch, chunk_rows):
+    # 3 envs x 200 samples = 600 columns per step: 250 makes column blocks with a partial last one, 700 one step per
+    # chunk, 2000 three steps per chunk with a partial last one
+    monkeypatch.setattr(fused, "CHUNK_ROWS", chunk_rows)
     policy = make_policy(NAVIGATION, "bicycle", n_samples=200)
     assert_same_plans(*plan_both_ways(policy, navigation_states(3)))
 

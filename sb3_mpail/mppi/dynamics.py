@@ -34,6 +34,23 @@ def feature_major_states(initial_states: th.Tensor, actions: th.Tensor) -> Tuple
     return columns.permute(1, 2, 3, 0), columns
 
 
+def hold_(columns: th.Tensor, dims: slice) -> None:
+    """Holds state dimensions ``dims`` of feature-major ``columns`` at their initial values over the whole horizon."""
+    # copied from s_0's contiguous rows: broadcasting each env's single value over the samples is several times slower
+    columns[dims, 1:] = columns[dims, :1]
+
+
+def running_sum_(values: th.Tensor, dim: int) -> th.Tensor:
+    """
+    Cumulative sum along ``dim`` in place, as one vector addition per step in the step-by-step model's order (torch's
+    CPU ``cumsum`` over a dimension that is not the last is several times slower).
+    """
+    steps = values.unbind(dim)
+    for previous, current in zip(steps, steps[1:]):
+        current.add_(previous)
+    return values
+
+
 class KinematicBicycle(nn.Module):
     """
     Kinematic bicycle for the 12-D car state ``[x, y, z, roll, pitch, yaw, vx, vy, vz, wx, wy, wz]``
@@ -80,22 +97,21 @@ class KinematicBicycle(nn.Module):
         """
         horizon = actions.shape[0]
         states, columns = feature_major_states(initial_states, actions)
-        held = initial_states.t()[:, :, None].unsqueeze(1)  # (12, 1, n_envs, 1)
-        columns[2:5, 1:] = held[2:5]
-        columns[8:11, 1:] = held[8:11]
+        hold_(columns, slice(2, 5))
+        hold_(columns, slice(8, 11))
         speed = th.mul(actions[..., 0], self.max_speed, out=columns[6, 1:])
         yaw_rate = th.mul(th.tan(actions[..., 1] * self.max_steer), speed, out=columns[11, 1:]).div_(self.wheelbase)
         columns[7, 1:] = 0.0
         # yaw_t = wrap(yaw_0 + sum_{i < t} yaw_rate_i dt), summed in the order of the step-by-step model
         yaw = columns[5]
         th.mul(yaw_rate, self.dt, out=yaw[1:])
-        yaw.cumsum_(dim=0)
+        running_sum_(yaw, dim=0)
         yaw[1:].add_(math.pi).remainder_(2 * math.pi).sub_(math.pi)
         # x_t = x_0 + sum_{i < t} speed_i cos(yaw_i) dt, likewise y
         heading = yaw[:horizon]
         th.mul(th.cos(heading), speed, out=columns[0, 1:]).mul_(self.dt)
         th.mul(th.sin(heading), speed, out=columns[1, 1:]).mul_(self.dt)
-        columns[:2].cumsum_(dim=1)
+        running_sum_(columns[:2], dim=1)
         return states
 
 

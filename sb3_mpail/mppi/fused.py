@@ -6,8 +6,9 @@ module call concatenates ``(s, s')``, recomputes the spectral-norm weights on ev
 intermediate afresh. Here instead:
 
 * the (normalised) weights are read once per planning step into a :class:`FrozenMlp`;
-* the discriminator's first layer is split into its ``s`` and ``s'`` halves, so every visited state is projected
-  once (one matmul over ``H + 1`` states) and ``W [s_t, s_{t+1}] = W_s s_t + W_s' s_{t+1}`` is a shifted sum;
+* the discriminator's first layer is split into its ``s`` and ``s'`` halves, ``W [s_t, s_{t+1}] = W_s s_t +
+  W_s' s_{t+1}``: two matmuls accumulate into one output that read the rolled-out states in place (row-major or
+  feature-major, see :func:`~sb3_mpail.mppi.dynamics.feature_major_states`), so no ``[s, s']`` is ever built;
 * activations run in place in scratch tensors of a :class:`Workspace` reused across chunks, iterations and calls;
 * the rows are processed in chunks that stay in the CPU cache;
 * the markups ``eta^t`` and the output layer fold into one matrix-vector product per chunk.
@@ -161,6 +162,7 @@ class FusedTransitionCost:
         n_states, n_envs, n_samples, state_dim = states.shape
         horizon = n_states - 1
         columns = n_envs * n_samples
+        # a view for row-major and feature-major storage alike (see feature_major_states): never a copy
         flat_states = states.reshape(n_states, columns, state_dim)
         costs = workspace.get("step_costs", (n_envs, n_samples), states).view(columns)
         if markups is not self._markups:  # the same markups come back every iteration of a planning step
@@ -168,39 +170,42 @@ class FusedTransitionCost:
             self._markups = markups
             self._negative_markups = -markups
             self._constant = self.mlp.biases[-1] * self._negative_markups.sum()
-        negative_markups, constant = self._negative_markups, self._constant
-        chunk = max(1, CHUNK_ROWS // horizon)
-        for start in range(0, columns, chunk):
-            stop = min(start + chunk, columns)
-            self._chunk_costs(flat_states[:, start:stop], negative_markups, constant, costs[start:stop], workspace)
+        costs.copy_(self._constant.expand(columns))
+        # Chunks of at most CHUNK_ROWS transitions: several whole time steps when one step has few columns, else
+        # column blocks of one time step. Either way a chunk's (time, column) rows merge into one stride, so the
+        # matrix products read the states in place whatever their layout.
+        steps_per_chunk = max(1, CHUNK_ROWS // columns)
+        column_chunk = min(columns, CHUNK_ROWS)
+        for start in range(0, columns, column_chunk):
+            stop = min(start + column_chunk, columns)
+            for first in range(0, horizon, steps_per_chunk):
+                last = min(first + steps_per_chunk, horizon)
+                self._add_chunk_costs(
+                    flat_states[first : last + 1, start:stop], self._negative_markups[first:last], costs[start:stop], workspace
+                )
         return costs.view(n_envs, n_samples)
 
-    def _chunk_costs(
-        self,
-        states: th.Tensor,
-        negative_markups: th.Tensor,
-        constant: th.Tensor,
-        out: th.Tensor,
-        workspace: Workspace,
-    ) -> None:
+    def _add_chunk_costs(self, states: th.Tensor, negative_markups: th.Tensor, out: th.Tensor, workspace: Workspace) -> None:
+        """Adds ``sum_t -m_t z_t`` of the chunk's transitions ``(states[t], states[t + 1])`` to ``out``."""
         n_states, columns, state_dim = states.shape
-        horizon, mlp = n_states - 1, self.mlp
-        if states.stride(0) != columns * states.stride(1):  # time and sample dimensions must merge into rows
-            states = workspace.get("state_chunk", states.shape, states).copy_(states)
-        rows = horizon * columns
+        steps, mlp = n_states - 1, self.mlp
+        rows = steps * columns
         hidden = workspace.get("first_layer", (rows, self.state_weight.shape[1]), states)
-        th.addmm(mlp.biases[0], states[:-1].reshape(rows, state_dim), self.state_weight, out=hidden)
-        hidden.addmm_(states[1:].reshape(rows, state_dim), self.next_state_weight)
+        first_states, next_states = states[:-1].reshape(rows, state_dim), states[1:].reshape(rows, state_dim)
         n_layers = len(mlp.weights)
-        if n_layers == 1:  # a linear discriminator: the first layer is the output, its bias already added
-            th.mv(hidden.view(horizon, columns).t(), negative_markups, out=out)
-            return
-        if mlp.activations[0] is not None:
-            mlp.activations[0](hidden)
-        hidden = _hidden_layers(mlp, hidden, 1, n_layers - 1, workspace)
-        logits = workspace.get("logits", (rows,), states)
-        th.mv(hidden, self.output_weight, out=logits)
-        th.addmv(constant, logits.view(horizon, columns).t(), negative_markups, out=out)
+        if n_layers == 1:  # a linear discriminator: its only bias is the output bias, already in the constant
+            th.mm(first_states, self.state_weight, out=hidden)
+        else:
+            th.addmm(mlp.biases[0], first_states, self.state_weight, out=hidden)
+        hidden.addmm_(next_states, self.next_state_weight)
+        if n_layers == 1:
+            logits = hidden.view(rows)
+        else:
+            if mlp.activations[0] is not None:
+                mlp.activations[0](hidden)
+            hidden = _hidden_layers(mlp, hidden, 1, n_layers - 1, workspace)
+            logits = th.mv(hidden, self.output_weight, out=workspace.get("logits", (rows,), states))
+        out.addmv_(logits.view(steps, columns).t(), negative_markups)
 
 
 class FusedValue:

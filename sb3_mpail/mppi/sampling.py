@@ -1,6 +1,6 @@
 """Action-sequence samplers for MPPI: perturb the warm-started plan into ``N`` candidate sequences."""
 
-from typing import Union
+from typing import Optional, Union
 
 import numpy as np
 import torch as th
@@ -27,6 +27,10 @@ class GaussianSampler(nn.Module):
         self.register_buffer("action_low", low)
         self.register_buffer("action_high", high)
         self.register_buffer("noise_std", th.as_tensor(noise_std, dtype=th.float32) * (high - low) / 2)
+        # Plain numbers when every action dimension shares them: scalar operands take the vectorised kernels, while
+        # broadcasting a per-dimension tensor over the short last dimension does not.
+        self._uniform_std = _common_value(self.noise_std)
+        self._uniform_bounds = (_common_value(low), _common_value(high))
 
     def forward(self, plan: th.Tensor, n_samples: int, generator: th.Generator) -> th.Tensor:
         """
@@ -39,5 +43,14 @@ class GaussianSampler(nn.Module):
         # one draw for all envs x samples x steps: a single kernel, independent noise per env
         noise = th.randn(horizon, n_envs, n_samples, action_dim, generator=generator, device=plan.device, dtype=plan.dtype)
         # in place on the fresh noise tensor: the samples stay contiguous and no second buffer is allocated
-        actions = noise.mul_(self.noise_std).add_(plan.transpose(0, 1).unsqueeze(2))
-        return th.clamp_(actions, self.action_low, self.action_high)
+        actions = noise.mul_(self.noise_std if self._uniform_std is None else self._uniform_std)
+        actions.add_(plan.transpose(0, 1).unsqueeze(2))
+        low, high = self._uniform_bounds
+        if low is None or high is None:
+            return th.clamp_(actions, self.action_low, self.action_high)
+        return th.clamp_(actions, low, high)
+
+
+def _common_value(values: th.Tensor) -> Optional[float]:
+    """The value every element of ``values`` shares, or ``None`` if they differ."""
+    return float(values[0]) if bool((values == values[0]).all()) else None
