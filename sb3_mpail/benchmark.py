@@ -29,6 +29,8 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import torch as th
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
 
 from benchmarks.report import BENCHMARKS_FILE, machine_description, write_section
 from benchmarks.scenarios import RESULTS as SCENARIO_RESULTS
@@ -129,13 +131,21 @@ def curve_point(predictor: Any, env_id: str, steps: int, n_episodes: int, stats:
     :param predictor: anything SB3's ``predict`` works on
     :param env_id: gymnasium id
     :param steps: env steps trained so far
-    :param n_episodes: evaluation episodes (not the lap's: its lap count is the scenario's)
+    :param n_episodes: evaluation episodes, env ``i`` reset with ``EVAL_SEED + i`` (not the lap's: its lap count is
+        the scenario's)
     :param stats: :func:`~sb3_mpail.baselines.expert_stats`
     """
     if env_id == LAP:
         figures = lap_figures(predictor, stats, SCENARIOS["lap"].n_eval_episodes)
         return (steps, *(figures[key] for key in LAP_FIGURES))
-    mean_return = float(np.mean([np.sum(t.rews) for t in evaluate(predictor, env_id, n_episodes, EVAL_SEED)]))
+    # exactly one episode per seed: imitation's rollout collector would add second episodes of the envs whose first
+    # one ended early (cartpole's falls), weighting the mean towards failures
+    env = make_vec_env(env_id, n_envs=n_episodes, seed=EVAL_SEED)
+    try:
+        returns, _ = evaluate_policy(predictor, env, n_episodes, deterministic=True, return_episode_rewards=True)
+    finally:
+        env.close()
+    mean_return = float(np.mean(returns))
     return steps, normalised_score(mean_return, stats), mean_return
 
 

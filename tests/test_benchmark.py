@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 from test_baselines import tiny_configs
 
@@ -110,3 +111,25 @@ def test_lap_runs_are_measured_by_cross_track_error_beside_mpail_s_scenario_runs
     text = report.read_text()
     assert "| MPAIL | 1 | 2 | **0.300 ± 0.000** (0.300, 0.300) | **2.500 ± 0.500** (2.000, 3.000) |" in text
     assert "| GAIL (state-only) | 1 | 1/1 |" in text and "`python -m benchmarks.scenarios lap`" in text
+
+
+def test_curve_points_average_exactly_one_episode_per_seed():
+    import gymnasium as gym
+
+    class PushRight:  # falls in a few dozen steps, so the envs' episodes end at different times
+        def predict(self, observation, state=None, episode_start=None, deterministic=False):
+            return np.ones((len(observation), 1), np.float32), state
+
+    env = gym.make("sb3_mpail/ContinuousCartPole-v0")
+    lengths = []
+    for i in range(4):
+        env.reset(seed=benchmark.EVAL_SEED + i)
+        steps, done = 0, False
+        while not done:
+            steps, (_, _, terminated, truncated, _) = steps + 1, env.step(np.ones(1, np.float32))
+            done = terminated or truncated
+        lengths.append(steps)
+    stats = json.loads((DEMO_DIR / "cartpole.json").read_text())
+    _, score, mean_return = benchmark.curve_point(PushRight(), "sb3_mpail/ContinuousCartPole-v0", 7, 4, stats)
+    assert len(set(lengths)) > 1 and mean_return == pytest.approx(np.mean(lengths))
+    assert score == pytest.approx(normalised_score(mean_return, stats))
