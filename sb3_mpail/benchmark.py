@@ -412,6 +412,39 @@ def plot_curves(results: List[Dict[str, Any]], env_id: str, n_demos: int, path: 
     return path
 
 
+def plot_lap_curves(results: List[Dict[str, Any]], path: Path) -> Optional[Path]:
+    """
+    The lap's mean cross-track error against env steps, one line per seed of each algorithm (log scale: a run that
+    leaves the track is metres off, one that follows it centimetres).
+
+    :param results: :func:`load_results` of the lap grid
+    :param path: the PNG to write
+    :return: the path, or ``None`` when there is nothing to plot
+    """
+    from sb3_mpail.plotting import import_pyplot
+
+    if not results:
+        return None
+    plt = import_pyplot()
+    figure, axis = plt.subplots(figsize=(8, 5), constrained_layout=True)
+    for index, algo in enumerate(ALGOS):
+        runs = sorted((r for r in results if r["algo"] == algo), key=lambda r: r["seed"])
+        for run in runs:
+            curve = np.asarray(run["curve"], dtype=float)
+            label = f"{ALGO_LABELS[algo]} ({len(runs)} seeds)" if run is runs[0] else None
+            axis.plot(curve[:, 0], curve[:, 1], color=f"C{index}", marker="o", ms=3, label=label)
+    axis.set_yscale("log")
+    axis.set_xlabel("env steps")
+    axis.set_ylabel(f"mean cross-track error over {SCENARIOS['lap'].n_eval_episodes} laps (m)")
+    axis.set_title(f"{LAP}, one seed per line")
+    axis.grid(alpha=0.3)
+    axis.legend(loc="best", fontsize=8)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+    return path
+
+
 def plot_ood(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int, path: Path) -> Optional[Path]:
     """
     Final positions of the navigation OOD episodes (starts uniform in the 40 x 40 m box), one panel per algorithm,
@@ -478,6 +511,9 @@ def write_report(
         results = load_results(results_dir, name)
         if env_id == LAP:
             section = lap_report(results, stats, algos, demos, n_seeds, command, scenario_mpail=timesteps is None)
+            figure = plot_lap_curves(results, figures_dir / f"baselines_{name}.png")
+            if figure is not None:
+                section += f"\n\n![{env_id}](benchmarks/figures/{figure.name})"
             write_section(f"baselines-{name}", section, report_file)
             continue
         budgets = {algo: sorted({r["n_timesteps"] for r in results if r["algo"] == algo}) for algo in algos}

@@ -111,6 +111,7 @@ def test_lap_runs_are_measured_by_cross_track_error_beside_mpail_s_scenario_runs
     text = report.read_text()
     assert "| MPAIL | 1 | 2 | **0.300 ± 0.000** (0.300, 0.300) | **2.500 ± 0.500** (2.000, 3.000) |" in text
     assert "| GAIL (state-only) | 1 | 1/1 |" in text and "`python -m benchmarks.scenarios lap`" in text
+    assert (tmp_path / "figures" / "baselines_lap.png").exists() and "baselines_lap.png" in text
 
 
 def test_curve_points_average_exactly_one_episode_per_seed():
