@@ -328,6 +328,11 @@ def ood_table(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int)
     return "\n".join(lines)
 
 
+def scenario_mpail_lap() -> Optional[Dict[str, Any]]:
+    """MPAIL's lap runs from ``benchmarks/scenarios.py`` (its ``scenarios.json`` entry), or ``None`` if not run."""
+    return json.loads(SCENARIO_RESULTS.read_text()).get("lap") if SCENARIO_RESULTS.exists() else None
+
+
 def lap_table(
     results: List[Dict[str, Any]], algos: Sequence[str], demos: Sequence[int], n_seeds: int, scenario_mpail: bool = True
 ) -> str:
@@ -350,11 +355,10 @@ def lap_table(
             runs = sorted((r for r in results if r["algo"] == algo and r["n_demos"] == n_demos), key=lambda r: r["seed"])
             done = f"{len(runs)}/{n_seeds}" + ("" if len(runs) >= n_seeds else " **incomplete**")
             rows.append((ALGO_LABELS[algo], n_demos, done, [run["lap"] for run in runs], "this grid"))
-    if scenario_mpail and not any(r["algo"] == "mpail" for r in results) and SCENARIO_RESULTS.exists():
-        scenario = json.loads(SCENARIO_RESULTS.read_text()).get("lap")
-        if scenario is not None:
-            runs = sorted(scenario["runs"], key=lambda run: run["seed"])
-            rows.insert(0, (ALGO_LABELS["mpail"], 1, str(len(runs)), runs, f"`{scenario['command']}`"))
+    scenario = scenario_mpail_lap() if scenario_mpail and not any(r["algo"] == "mpail" for r in results) else None
+    if scenario is not None:
+        runs = sorted(scenario["runs"], key=lambda run: run["seed"])
+        rows.insert(0, (ALGO_LABELS["mpail"], 1, str(len(runs)), runs, f"`{scenario['command']}`"))
     for label, n_demos, done, figures, source in rows:
         if not figures:
             lines.append(f"| {label} | {n_demos} | {done} | not run | not run | not run | {source} |")
@@ -412,13 +416,15 @@ def plot_curves(results: List[Dict[str, Any]], env_id: str, n_demos: int, path: 
     return path
 
 
-def plot_lap_curves(results: List[Dict[str, Any]], path: Path) -> Optional[Path]:
+def plot_lap_curves(results: List[Dict[str, Any]], path: Path, scenario_mpail: bool = True) -> Optional[Path]:
     """
     The lap's mean cross-track error against env steps, one line per seed of each algorithm (log scale: a run that
     leaves the track is metres off, one that follows it centimetres).
 
     :param results: :func:`load_results` of the lap grid
     :param path: the PNG to write
+    :param scenario_mpail: when the grid has no MPAIL runs, draw the final figures of MPAIL's scenario runs (no
+        curve is kept for them) as dashed lines at their budget
     :return: the path, or ``None`` when there is nothing to plot
     """
     from sb3_mpail.plotting import import_pyplot
@@ -433,6 +439,11 @@ def plot_lap_curves(results: List[Dict[str, Any]], path: Path) -> Optional[Path]
             curve = np.asarray(run["curve"], dtype=float)
             label = f"{ALGO_LABELS[algo]} ({len(runs)} seeds)" if run is runs[0] else None
             axis.plot(curve[:, 0], curve[:, 1], color=f"C{index}", marker="o", ms=3, label=label)
+    scenario = scenario_mpail_lap() if scenario_mpail and not any(r["algo"] == "mpail" for r in results) else None
+    if scenario is not None:
+        for run in scenario["runs"]:
+            label = f"{ALGO_LABELS['mpail']} after {scenario['timesteps']} steps ({len(scenario['runs'])} seeds, scenarios.py)"
+            axis.axhline(run["cte_mean"], color="C0", ls="--", lw=1, label=label if run is scenario["runs"][0] else None)
     axis.set_yscale("log")
     axis.set_xlabel("env steps")
     axis.set_ylabel(f"mean cross-track error over {SCENARIOS['lap'].n_eval_episodes} laps (m)")
@@ -511,7 +522,7 @@ def write_report(
         results = load_results(results_dir, name)
         if env_id == LAP:
             section = lap_report(results, stats, algos, demos, n_seeds, command, scenario_mpail=timesteps is None)
-            figure = plot_lap_curves(results, figures_dir / f"baselines_{name}.png")
+            figure = plot_lap_curves(results, figures_dir / f"baselines_{name}.png", scenario_mpail=timesteps is None)
             if figure is not None:
                 section += f"\n\n![{env_id}](benchmarks/figures/{figure.name})"
             write_section(f"baselines-{name}", section, report_file)

@@ -99,7 +99,9 @@ def test_cartpole_runs_are_scored_against_its_expert_and_random_returns(tmp_path
 def test_lap_runs_are_measured_by_cross_track_error_beside_mpail_s_scenario_runs(tmp_path, monkeypatch):
     mpail_runs = [dict(seed=seed, cte_mean=0.3, cte_max=2.0 + seed, speed=1.0, seconds=1.0) for seed in range(2)]
     scenarios = tmp_path / "scenarios.json"
-    scenarios.write_text(json.dumps(dict(lap=dict(runs=mpail_runs, command="python -m benchmarks.scenarios lap"))))
+    scenarios.write_text(
+        json.dumps(dict(lap=dict(runs=mpail_runs, timesteps=144000, command="python -m benchmarks.scenarios lap")))
+    )
     monkeypatch.setattr(benchmark, "SCENARIO_RESULTS", scenarios)
     results, report = tmp_path / "results", tmp_path / "BENCHMARKS.md"
     main(["--envs", "lap", "--algos", "gail", "--demos", "1", "--seeds", "1", "--config-dir",
