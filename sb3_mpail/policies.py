@@ -20,6 +20,9 @@ from sb3_mpail.mppi.dynamics import DynamicsSpec, LearnedDynamics, make_dynamics
 from sb3_mpail.mppi.planner import MPPIPlanner
 from sb3_mpail.mppi.sampling import GaussianSampler
 
+#: the deterministic-planning noise stream is seeded with ``seed + DETERMINISTIC_SEED_OFFSET``
+DETERMINISTIC_SEED_OFFSET = 1_000_003
+
 
 class MPPIPolicy(BasePolicy):
     """
@@ -131,7 +134,7 @@ class MPPIPolicy(BasePolicy):
         self.register_buffer("action_low", th.as_tensor(low))
         self.register_buffer("action_high", th.as_tensor(high))
         self._seed: int | None = None
-        self._generator: th.Generator | None = None
+        self._generators: Dict[bool, th.Generator] = {}
 
     def _get_constructor_parameters(self) -> Dict[str, Any]:
         return {**super()._get_constructor_parameters(), **self._constructor_kwargs}
@@ -146,20 +149,26 @@ class MPPIPolicy(BasePolicy):
         model, its replay buffer and minibatch order (the same seed gives the same fitted model).
         """
         self._seed = seed
-        self._generator = None
+        self._generators = {}
         if isinstance(self.dynamics, LearnedDynamics):
             self.dynamics.seed(seed)
 
-    @property
-    def generator(self) -> th.Generator:
-        """The planner's noise source, on the policy's device (re-created, re-seeded, if the policy moved)."""
-        if self._generator is None or self._generator.device != self.device:
-            self._generator = th.Generator(device=self.device)
+    def generator(self, deterministic: bool = False) -> th.Generator:
+        """
+        The planner's noise source, on the policy's device (re-created, re-seeded, if the policy moved). Deterministic
+        planning (evaluation, deployment) has a stream of its own, so evaluating during training leaves the training
+        samples, and with them the learning curve, unchanged.
+
+        :param deterministic: the stream of deterministic planning rather than of training
+        """
+        generator = self._generators.get(deterministic)
+        if generator is None or generator.device != self.device:
+            generator = self._generators[deterministic] = th.Generator(device=self.device)
             if self._seed is None:
-                self._generator.seed()
+                generator.seed()
             else:
-                self._generator.manual_seed(self._seed)
-        return self._generator
+                generator.manual_seed(self._seed + DETERMINISTIC_SEED_OFFSET if deterministic else self._seed)
+        return generator
 
     def initial_plan(self, n_envs: int) -> th.Tensor:
         """The plan of an env at the start of an episode, ``(n_envs, horizon, action_dim)``."""
@@ -176,10 +185,11 @@ class MPPIPolicy(BasePolicy):
         :param previous_plan: ``(n_envs, horizon, action_dim)``
         :return: actions ``(n_envs, action_dim)`` and the new plan
         """
-        plan, action_std = self.planner(observations.float(), previous_plan, self.temperature, self.generator)
+        generator = self.generator(deterministic)
+        plan, action_std = self.planner(observations.float(), previous_plan, self.temperature, generator)
         actions = plan[:, 0]
         if not deterministic:
-            noise = th.randn(actions.shape, generator=self.generator, device=actions.device, dtype=actions.dtype)
+            noise = th.randn(actions.shape, generator=generator, device=actions.device, dtype=actions.dtype)
             actions = th.clamp(actions + action_std * noise, self.action_low, self.action_high)
         return actions, plan
 

@@ -240,3 +240,15 @@ def test_shipped_pendulum_demos_match_the_environment():
     demos_file = Path(__file__).resolve().parent.parent / "demos" / "pendulum_4.npz"
     transitions = load_demos(demos_file, gym.make("Pendulum-v1").observation_space)
     assert transitions.observations.shape == (4 * 200, 3)
+
+
+def test_deterministic_predictions_during_training_leave_the_learning_unchanged(demos):
+    observation = np.array([[0.0, 1.0, 0.0]], np.float32)
+    models = []
+    for evaluate in (False, True):
+        model = make_model(demos, seed=5).learn(24)
+        if evaluate:  # as an evaluation callback would, between two parts of training
+            model.predict(observation, deterministic=True)
+        models.append(model.learn(24, reset_num_timesteps=False))
+    for (name, a), (_, b) in zip(models[0].policy.state_dict().items(), models[1].policy.state_dict().items()):
+        assert th.equal(a, b), name
