@@ -8,6 +8,7 @@ the same units (``achieved_goal`` repeats the ego features and is dropped). Its 
 :class:`sb3_mpail.mppi.dynamics.ParkingKinematics`.
 """
 
+import functools
 from typing import Any, Dict, Optional, Tuple
 
 import gymnasium as gym
@@ -31,6 +32,45 @@ def require_highway_env() -> None:
         raise ImportError(f"This scenario needs highway-env, which is not installed: {SCENARIOS_INSTALL_HINT}") from error
 
 
+@functools.cache
+def numpy_observation_parking_env() -> type:
+    """
+    highway-env's ``ParkingEnv`` whose goal observations are read from the vehicles with numpy: the same float64
+    values as highway-env's ``KinematicsGoalObservation``, which builds a pandas DataFrame from each vehicle's full
+    ``to_dict`` (lane offsets included) and is queried four times a step (observation, reward, termination, info),
+    most of a step's time. The class is made on first use because highway-env is optional.
+
+    :return: the ``ParkingEnv`` subclass
+    """
+    require_highway_env()
+    from highway_env.envs.common.observation import KinematicsGoalObservation
+    from highway_env.envs.parking_env import ParkingEnv
+
+    class NumpyKinematicsGoalObservation(KinematicsGoalObservation):
+        """``KinematicsGoalObservation`` for ``PARKING_FEATURES`` only, without pandas."""
+
+        def observe(self) -> Dict[str, np.ndarray]:
+            vehicle = self.observer_vehicle
+            if not vehicle:
+                return super().observe()
+            # to_dict's x, y, vx, vy, cos_h, sin_h; the goal (a Landmark) has zero speed, so zero velocity
+            observation = np.concatenate((vehicle.position, vehicle.velocity, vehicle.direction)) / self.scales
+            goal = vehicle.goal
+            desired_goal = np.array([*goal.position, 0.0, 0.0, np.cos(goal.heading), np.sin(goal.heading)]) / self.scales
+            return {"observation": observation, "achieved_goal": observation.copy(), "desired_goal": desired_goal}
+
+    class NumpyObservationParkingEnv(ParkingEnv):
+        """``ParkingEnv`` observing through :class:`NumpyKinematicsGoalObservation`."""
+
+        def define_spaces(self) -> None:
+            super().define_spaces()
+            self.observation_type = NumpyKinematicsGoalObservation(self, **self.config["observation"])
+            self.observation_type_parking = NumpyKinematicsGoalObservation(self, **self.PARKING_OBS["observation"])
+            self.observation_space = self.observation_type.space()
+
+    return NumpyObservationParkingEnv
+
+
 class FlatParkingEnv(gym.Env):
     """
     highway-env's ``parking-v0`` with a flat Box observation: ``[observation, desired_goal]`` of its dict observation,
@@ -41,23 +81,34 @@ class FlatParkingEnv(gym.Env):
     :param config: overrides of ``parking-v0``'s default config; the observation must stay the default one
     :param render_mode: gymnasium render mode
     :param dtype: dtype of the observation (``np.float64`` keeps the simulator's values exactly)
+    :param numpy_observation: observe through :func:`numpy_observation_parking_env` (same values, several times more
+        steps per second: see benchmarks/parking_model.py); ``False``: highway-env's own pandas-based observation
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 5}
 
-    def __init__(self, config: Optional[Dict[str, Any]] = None, render_mode: Optional[str] = None, dtype: type = np.float32):
+    def __init__(
+        self,
+        config: Optional[Dict[str, Any]] = None,
+        render_mode: Optional[str] = None,
+        dtype: type = np.float32,
+        numpy_observation: bool = True,
+    ):
         require_highway_env()
         from highway_env.envs.parking_env import ParkingEnv
 
-        self.parking = ParkingEnv(config=config, render_mode=render_mode)
-        self.render_mode = render_mode
-        self.dtype = dtype
-        observation = self.parking.config["observation"]
+        # checked before the env is made, whose numpy observation reads exactly these features; highway-env
+        # replaces the default config's entries whole
+        observation = {**ParkingEnv.default_config(), **(config or {})}["observation"]
         if observation.get("features") != PARKING_FEATURES or list(observation.get("scales", [])) != PARKING_SCALES:
             raise ValueError(
                 f"sb3_mpail/Parking-v0 keeps parking-v0's observation (features {PARKING_FEATURES}, scales "
                 f"{PARKING_SCALES}), which its planning model decodes; the config asks for {observation}."
             )
+        parking_env_class = numpy_observation_parking_env() if numpy_observation else ParkingEnv
+        self.parking = parking_env_class(config=config, render_mode=render_mode)
+        self.render_mode = render_mode
+        self.dtype = dtype
         # Generous finite bounds (observation units): positions 1 km, speeds 50 m/s (highway-env caps them near 40).
         high = np.tile([10.0, 10.0, 10.0, 10.0, 1.0, 1.0], 2)
         self.observation_space = spaces.Box(-high, high, dtype=dtype)
