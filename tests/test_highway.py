@@ -11,6 +11,7 @@ import torch as th
 
 import sb3_mpail.envs  # noqa: F401  (registers the environments)
 from sb3_mpail.mppi import DEFAULT_DYNAMICS, ParkingKinematics, make_dynamics
+from sb3_mpail.mppi.reference import rollout as rollout_step_by_step
 
 PARKING_ID = "sb3_mpail/Parking-v0"
 
@@ -82,6 +83,53 @@ def test_parking_model_predicts_highway_env_on_non_crash_steps():
         if terminated or truncated:
             observation, _ = env.reset()
     assert checked > 100
+
+
+def test_parking_env_numpy_observation_equals_parking_v0s_own():
+    pytest.importorskip("highway_env")
+    ours = gym.make(PARKING_ID, dtype=np.float64)
+    theirs = gym.make("parking-v0")
+    rng = np.random.default_rng(0)
+    observation, _ = ours.reset(seed=0)
+    expected, _ = theirs.reset(seed=0)
+    episodes = 1
+    for _ in range(200):
+        assert observation.tolist() == [*expected["observation"], *expected["desired_goal"]]
+        action = rng.uniform(-1, 1, size=2).astype(np.float32)
+        observation, reward, terminated, truncated, info = ours.step(action)
+        expected, expected_reward, *expected_ends, expected_info = theirs.step(action)
+        assert (reward, terminated, truncated) == (expected_reward, *expected_ends)
+        assert (info["is_success"], info["crashed"]) == (expected_info["is_success"], expected_info["crashed"])
+        if terminated or truncated:
+            episodes += 1
+            observation, _ = ours.reset(seed=episodes)
+            expected, _ = theirs.reset(seed=episodes)
+    assert episodes > 1  # the comparison went through a reset
+
+
+@pytest.mark.parametrize("speed", [2.0, 39.5], ids=["free", "at-the-speed-limit"])
+def test_parking_model_batched_rollout_matches_step_by_step(speed):
+    model = ParkingKinematics()
+    generator = th.Generator().manual_seed(0)
+    headings = th.rand(3, generator=generator, dtype=th.float64) * 2 * math.pi
+    states = th.zeros(3, 12, dtype=th.float64)
+    states[:, :2] = th.rand(3, 2, generator=generator, dtype=th.float64) * 0.6 - 0.3
+    states[:, 2], states[:, 3] = speed / 5 * th.cos(headings), speed / 5 * th.sin(headings)
+    states[:, 4], states[:, 5] = th.cos(headings), th.sin(headings)
+    states[:, 6:] = th.tensor([0.26, 0.14, 0.0, 0.0, 0.0, 1.0], dtype=th.float64)
+    # beyond [-1, 1] too: the model clips like highway-env
+    actions = th.randn(15, 3, 64, 2, generator=generator, dtype=th.float64) * 1.2
+    with th.no_grad():
+        batched = model.rollout(states, actions)
+    np.testing.assert_allclose(batched, rollout_step_by_step(model, states, actions), rtol=0, atol=1e-12)
+
+
+def test_parking_trains_with_the_shipped_zoo_entry(tmp_path):
+    pytest.importorskip("highway_env")
+    from test_scenarios import zoo_train
+
+    model = zoo_train(PARKING_ID, 400, tmp_path)
+    assert isinstance(model.policy.dynamics, ParkingKinematics)
 
 
 def test_parking_env_refuses_an_observation_its_model_cannot_decode():
