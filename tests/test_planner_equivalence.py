@@ -110,7 +110,7 @@ def test_other_network_shapes_match_the_reference(network_kwargs):
 def test_cache_sized_chunks_match_the_reference(monkeypatch, chunk_rows):
     # 3 envs x 200 samples = 600 columns per step: 250 makes column blocks with a partial last one, 700 one step per
     # chunk, 2000 three steps per chunk with a partial last one
-    monkeypatch.setattr(fused, "CHUNK_ROWS", chunk_rows)
+    monkeypatch.setattr(fused, "chunk_rows", lambda: chunk_rows)
     policy = make_policy(NAVIGATION, "bicycle", n_samples=200)
     assert_same_plans(*plan_both_ways(policy, navigation_states(3)))
 

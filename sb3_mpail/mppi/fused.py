@@ -24,8 +24,13 @@ import torch as th
 import torch.nn.functional as F
 from torch import nn
 
-#: rows per chunk of the hidden activations: 8192 x 32 floats (1 MiB) stay in the cache between layers
-CHUNK_ROWS = 8192
+#: rows per chunk of the hidden activations and thread: 8192 x 32 floats (1 MiB) stay in a core's cache between layers
+CHUNK_ROWS_PER_THREAD = 8192
+
+
+def chunk_rows() -> int:
+    """Rows per chunk: each of torch's threads takes about ``CHUNK_ROWS_PER_THREAD`` of a chunk's matrix products."""
+    return CHUNK_ROWS_PER_THREAD * th.get_num_threads()
 
 InPlaceActivation = Callable[[th.Tensor], th.Tensor]
 
@@ -171,11 +176,12 @@ class FusedTransitionCost:
             self._negative_markups = -markups
             self._constant = self.mlp.biases[-1] * self._negative_markups.sum()
         costs.copy_(self._constant.expand(columns))
-        # Chunks of at most CHUNK_ROWS transitions: several whole time steps when one step has few columns, else
+        # Chunks of at most chunk_rows() transitions: several whole time steps when one step has few columns, else
         # column blocks of one time step. Either way a chunk's (time, column) rows merge into one stride, so the
         # matrix products read the states in place whatever their layout.
-        steps_per_chunk = max(1, CHUNK_ROWS // columns)
-        column_chunk = min(columns, CHUNK_ROWS)
+        rows_per_chunk = chunk_rows()
+        steps_per_chunk = max(1, rows_per_chunk // columns)
+        column_chunk = min(columns, rows_per_chunk)
         for start in range(0, columns, column_chunk):
             stop = min(start + column_chunk, columns)
             for first in range(0, horizon, steps_per_chunk):
@@ -228,8 +234,9 @@ class FusedValue:
         rows = flat_states.shape[0]
         values = workspace.get("values", (rows,), states)
         mlp = self.mlp
-        for start in range(0, rows, CHUNK_ROWS):
-            stop = min(start + CHUNK_ROWS, rows)
+        rows_per_chunk = chunk_rows()
+        for start in range(0, rows, rows_per_chunk):
+            stop = min(start + rows_per_chunk, rows)
             hidden = _hidden_layers(mlp, flat_states[start:stop], 0, len(mlp.weights) - 1, workspace)
             th.addmv(mlp.biases[-1], hidden, mlp.weights[-1][:, 0], out=values[start:stop])
         return values.view(states.shape[:-1])
