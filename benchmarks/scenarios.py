@@ -5,15 +5,28 @@ zoo_configs/mpail.yml`` uses) from its shipped demos, over several seeds, and ev
 
 - ``cartpole``: MPAIL-OM's return as a normalised score (random = 0, expert = 1, from ``demos/cartpole.json``);
 - ``lap``: the single noisy, partially observed demo: cross-track error to the demo's recorded path (mean and max
-  over 5 laps) and mean speed, next to the scripted driver's own (``demos/lap.json``).
+  over 5 laps) and mean speed, next to the scripted driver's own (``demos/lap.json``);
+- ``parking``: highway-env ``parking-v0``'s return as a normalised score and the share of episodes ending parked
+  (``demos/parking.json``);
+- ``racetrack``: highway-env ``racetrack-v0`` (no other vehicles) driven by steering: its return as a normalised
+  score and the share of steps on the road (``demos/racetrack.json``);
+- ``highway``: highway-env ``highway-v0`` (no other vehicles) driven by acceleration and steering: its return as a
+  normalised score, the share of steps on the road and the mean speed (``demos/highway.json``);
+- ``ant``: MuJoCo Ant with an online-learned model (MPAIL-OM): its return as a normalised score and its forward speed,
+  next to the expert's (``demos/ant.json``);
+- ``pointmaze``: gymnasium-robotics PointMaze (U-maze, fixed start and goal cells) planned through a wall-free
+  point-mass model: its return as a normalised score, the share of episodes ending at the goal and the share of
+  steps touching a wall (``demos/pointmaze.json``).
 
 Run: ``python -m benchmarks.scenarios cartpole --seeds 0 1 2``; each run's figures are kept in
-``benchmarks/figures/scenarios.json`` and the ``scenarios`` section of BENCHMARKS.md is rebuilt from all of them.
+``benchmarks/figures/scenarios.json`` and the ``scenarios`` section of BENCHMARKS.md is rebuilt from all of them, with
+the notes of ``benchmarks/scenarios_notes.md`` (``--report-only`` rebuilds it without training).
 """
 
 import argparse
 import json
 import time
+from functools import partial
 from pathlib import Path
 from typing import Callable, Dict, List, NamedTuple, Tuple
 
@@ -27,11 +40,15 @@ import sb3_mpail.envs  # noqa: F401  (registers the package's envs)
 from benchmarks.report import machine_description, write_section
 from sb3_mpail import MPAIL
 from sb3_mpail.demos import normalised_score
+from sb3_mpail.envs.ant import evaluate_ant
 from sb3_mpail.envs.lap import lap_metrics
+from sb3_mpail.envs.maze import point_maze_figures
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "figures" / "scenarios.json"
 ZOO_CONFIG = ROOT / "zoo_configs" / "mpail.yml"
+#: how each scenario's settings were chosen, what failed and what is left: written by hand, appended to the section
+NOTES = ROOT / "benchmarks" / "scenarios_notes.md"
 EVAL_SEED = 10_000
 
 
@@ -68,6 +85,112 @@ def lap_reference(stats: Dict) -> str:
         f"The demo's driver ({stats['expert']}) on the same laps: cross-track error {driver['cte_mean']:.3f} m mean, "
         f"{driver['cte_max']:.3f} m max, speed {driver['speed']:.2f} m/s. Demo noise: {stats['position_noise']} m on "
         f"position, {stats['velocity_noise']} m/s on velocity. Paper (real robot): MPAIL 0.17 / 0.76 m at 0.70 m/s."
+    )
+
+
+def parking_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, float]:
+    """
+    Mean parking-v0 return of the deterministic planner, its normalised score and the shares of episodes that end
+    parked and crashed. The success rate is the figure that says whether it parks: a crash costs only 5 and ends
+    the episode, so crashing early returns more than driving around for the 100 s limit.
+    """
+    eval_env = make_vec_env("sb3_mpail/Parking-v0", n_envs=n_episodes, seed=EVAL_SEED)
+    endings: List[Dict] = []
+
+    def record_ending(local: Dict, _: Dict) -> None:  # evaluate_policy's per-env, per-step callback
+        if local["done"]:
+            endings.append(local["info"])
+
+    returns, _ = evaluate_policy(
+        model, eval_env, n_eval_episodes=n_episodes, deterministic=True, return_episode_rewards=True, callback=record_ending
+    )
+    mean_return = float(np.mean(returns))
+    return {
+        "return": mean_return,
+        "score": normalised_score(mean_return, stats),
+        "success": float(np.mean([info["is_success"] for info in endings])),
+        "crashed": float(np.mean([info["crashed"] for info in endings])),
+    }
+
+
+def parking_reference(stats: Dict) -> str:
+    return (
+        f"Expert ({stats['expert_algo']}) {stats['expert_return_mean']:.1f}, parked in {stats['expert_success_rate']:.0%} "
+        f"of {stats['n_eval_episodes']} episodes; random {stats['random_return_mean']:.1f}, "
+        f"{stats['random_success_rate']:.0%} parked."
+    )
+
+
+def road_figures(env_id: str, model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, float]:
+    """
+    Mean return of the deterministic planner on a highway-env road scenario (racetrack: lane centring minus a steering
+    penalty; highway: speed and rightmost lane; up to 1 per step, 0 off the road), its normalised score, the share of
+    steps on which the car is on the road and its mean speed.
+    """
+    eval_env = make_vec_env(env_id, n_envs=n_episodes, seed=EVAL_SEED)
+    on_road: List[bool] = []
+    speeds: List[float] = []
+
+    def record_step(local: Dict, _: Dict) -> None:  # evaluate_policy's per-env, per-step callback
+        on_road.append(bool(local["info"]["rewards"]["on_road_reward"]))
+        speeds.append(float(local["info"]["speed"]))
+
+    returns, _ = evaluate_policy(
+        model, eval_env, n_eval_episodes=n_episodes, deterministic=True, return_episode_rewards=True, callback=record_step
+    )
+    mean_return = float(np.mean(returns))
+    return {
+        "return": mean_return,
+        "score": normalised_score(mean_return, stats),
+        "on_road": float(np.mean(on_road)),
+        "speed": float(np.mean(speeds)),
+    }
+
+
+def road_reference(stats: Dict) -> str:
+    return (
+        f"Expert ({stats['expert_algo']}) {stats['expert_return_mean']:.1f}, random {stats['random_return_mean']:.1f} "
+        f"over {stats['n_eval_episodes']} episodes of 200 steps."
+    )
+
+
+ROAD_COLUMNS = (("return", "return"), ("score", "normalised score"), ("on_road", "share of steps on the road"))
+
+
+def ant_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, float]:
+    """
+    Mean return of the deterministic planner, its normalised score and its forward speed (the torso's x velocity
+    over every step): the paper's Ant walks, but slower than the expert. Standing still is worth about 1 per step
+    (the healthy reward), so the speed says more than the score about whether it walks.
+    """
+    figures = evaluate_ant(model, n_episodes, EVAL_SEED, n_envs=n_episodes)
+    mean_return = figures["return"]
+    return {"return": mean_return, "score": normalised_score(mean_return, stats), "speed": figures["forward_speed"]}
+
+
+def ant_reference(stats: Dict) -> str:
+    return (
+        f"Expert ({stats['expert_algo']}, {stats['expert_timesteps']} steps) {stats['expert_return_mean']:.1f} at "
+        f"{stats['expert_forward_speed']:.2f} m/s, random {stats['random_return_mean']:.1f} over "
+        f"{stats['n_eval_episodes']} episodes of 200 steps."
+    )
+
+
+def pointmaze_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, float]:
+    """
+    Mean return of the deterministic planner, its normalised score, the share of episodes ending within 0.45 m of
+    the goal and the share of steps touching a wall: the planning model has no walls, so the learned cost and
+    value alone must keep the planner in the corridors the demos took.
+    """
+    figures = point_maze_figures(model, n_episodes, EVAL_SEED)
+    return {**figures, "score": normalised_score(figures["return"], stats)}
+
+
+def pointmaze_reference(stats: Dict) -> str:
+    return (
+        f"Expert ({stats['expert_algo']}) {stats['expert_return_mean']:.1f}, at the goal in "
+        f"{stats['expert_success_rate']:.0%} of {stats['n_eval_episodes']} episodes, touching a wall in "
+        f"{stats['expert_wall_steps']:.2%} of steps; random {stats['random_return_mean']:.1f} over 100-step episodes."
     )
 
 
@@ -112,29 +235,53 @@ SCENARIOS: Dict[str, Scenario] = {
         lap_reference,
         5,
     ),
+    "parking": Scenario(
+        "sb3_mpail/Parking-v0",
+        "demos/parking.json",
+        "highway-env parking-v0 from 4 scripted-expert demos (observations only)",
+        parking_figures,
+        (("return", "return"), ("score", "normalised score"), ("success", "success rate"), ("crashed", "crash rate")),
+        parking_reference,
+        10,
+    ),
+    "racetrack": Scenario(
+        "sb3_mpail/Racetrack-v0",
+        "demos/racetrack.json",
+        "highway-env racetrack-v0 (steering only, no other vehicles) from 4 scripted lane-keeping demos (observations only)",
+        partial(road_figures, "sb3_mpail/Racetrack-v0"),
+        ROAD_COLUMNS,
+        road_reference,
+        10,
+    ),
+    "highway": Scenario(
+        "sb3_mpail/Highway-v0",
+        "demos/highway.json",
+        "highway-env highway-v0 (acceleration and steering, no other vehicles) from 4 scripted demos (observations only)",
+        partial(road_figures, "sb3_mpail/Highway-v0"),
+        (*ROAD_COLUMNS, ("speed", "speed (m/s)")),
+        road_reference,
+        10,
+    ),
+    "ant": Scenario(
+        "sb3_mpail/Ant-v0",
+        "demos/ant.json",
+        "MuJoCo Ant (27-D observation, 200 steps) with an online-learned model (MPAIL-OM) from 4 PPO demos",
+        ant_figures,
+        (("return", "return"), ("score", "normalised score"), ("speed", "forward speed (m/s)")),
+        ant_reference,
+        5,
+    ),
+    "pointmaze": Scenario(
+        "sb3_mpail/PointMaze-v0",
+        "demos/pointmaze.json",
+        "gymnasium-robotics PointMaze U-maze through a wall-free point-mass model, from 4 scripted demos (observations only)",
+        pointmaze_figures,
+        (("return", "return"), ("score", "normalised score"), ("success", "success rate"), ("wall_steps", "steps on a wall")),
+        pointmaze_reference,
+        10,
+    ),
 }
 
-NOT_DONE = """### How the lap settings were chosen
-
-On seed 0 only, 144k steps each, cross-track error on 2 laps every 24k steps (script not kept): the first entry
-(discriminator learning rate 1e-4, the paper's) wandered: 0.27 m at 24k while barely moving (0.18 m/s), then
-0.9-2.2 m; discriminator L2 1e-3 (the paper's real-data setting): 0.7-3.3 m; horizon 20: 1.2-19 m; discriminator
-every 3rd iteration: 0.8-20 m (0.12 m once, nearly stopped), unstable; a noise-free demo with the first settings:
-0.24-8 m, so the sensor noise was not the main obstacle. A faster discriminator helped: learning rate 1e-3 reached
-0.32-0.64 m from 72k steps, 3e-3 (kept) 0.22-0.42 m from 72k, both at about 1.0 m/s.
-
-### Not done
-
-- **highway-env `parking-v0` / `racetrack-v0`**, **gymnasium-robotics `PointMaze`**, **MuJoCo `Ant`**: not
-  started (no env wrapper, demos, config or figures), so there is no optional-dependency extra or
-  "what to install" error yet; nothing was trained on them. Checked only: `pip install --dry-run -c constraints.txt
-  highway-env==1.9.1 gymnasium-robotics==1.2.4 mujoco==2.3.7` resolves without changing gymnasium or numpy (it
-  would add those three and glfw, imageio, pettingzoo, pyopengl).
-- The lap's max cross-track error (about 2.5 m, against 0.37 m mean) was not traced to where on the lap it occurs.
-- **GAIL on the lap scenario** and **MPAIL-OM vs GAIL/AIRL on the same cartpole budget**: not run.
-- The lap's demo comes from a scripted pure-pursuit driver, not an SB3 expert (the paper's demo was driven on the
-  real car); its sensor noise is Gaussian, 0.05 m and 0.05 m/s.
-"""
 
 
 def zoo_hyperparameters(env_id: str) -> Dict:
@@ -157,12 +304,29 @@ def run_seed(scenario: Scenario, stats: Dict, seed: int, n_eval_episodes: int) -
     return {"seed": seed, **scenario.figures(model, stats, n_eval_episodes), "seconds": seconds}
 
 
+def mean_and_std(runs: List[Dict], key: str) -> str:
+    values = [run[key] for run in runs]
+    return f"{np.mean(values):.3f} ± {np.std(values):.3f}"
+
+
+def summary_table(results: Dict[str, Dict]) -> str:
+    """One row per scenario: its budget, seeds and every figure's mean ± std over the seeds."""
+    rows = []
+    for name, result in results.items():
+        scenario, runs = SCENARIOS[name], result["runs"]
+        figures = "; ".join(f"{title} {mean_and_std(runs, key)}" for key, title in scenario.columns)
+        rows.append(f"| `{name}` | `{scenario.env_id}` | {result['timesteps']} | {len(runs)} | {figures} |")
+    header = "| scenario | env | env steps per seed | seeds | figures (mean ± std over seeds) |\n|---|---|---|---|---|\n"
+    return header + "\n".join(rows)
+
+
 def section(results: Dict[str, Dict]) -> str:
     """The ``scenarios`` section of BENCHMARKS.md from every scenario's stored results."""
     parts = [
         "## Scenarios beyond navigation (issue 5)\n\n"
         "MPAIL's deterministic planner after training with the scenario's `zoo_configs/mpail.yml` entry, evaluated on "
-        "fixed episodes (reset seeds from 10000); normalised score = (return - random) / (expert - random)."
+        "fixed episodes (reset seeds from 10000); normalised score = (return - random) / (expert - random).",
+        summary_table(results),
     ]
     for name, result in results.items():
         scenario = SCENARIOS[name]
@@ -172,9 +336,7 @@ def section(results: Dict[str, Dict]) -> str:
             f"| {run['seed']} | " + " | ".join(f"{run[key]:.3f}" for key in keys) + f" | {run['seconds']:.0f} |"
             for run in runs
         )
-        summary = " | ".join(
-            f"**{np.mean([run[key] for run in runs]):.3f} ± {np.std([run[key] for run in runs]):.3f}**" for key in keys
-        )
+        summary = " | ".join(f"**{mean_and_std(runs, key)}**" for key in keys)
         parts.append(
             f"""### {scenario.title}: `{scenario.env_id}`
 
@@ -189,17 +351,23 @@ evaluation episodes per seed. {scenario.reference(result['stats'])} (`{scenario.
 Command: `{result['command']}` on {result['machine']}. Zoo equivalent (one seed):
 `python -m sb3_mpail.zoo train --algo mpail --env {SCENARIOS[name].env_id} -conf zoo_configs/mpail.yml`."""
         )
-    parts.append(NOT_DONE)
+    parts.append(NOTES.read_text().strip())
     return "\n\n".join(parts)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("scenario", choices=sorted(SCENARIOS))
+    parser.add_argument("scenario", nargs="?", choices=sorted(SCENARIOS))
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--threads", type=int, default=1, help="torch threads per run")
     parser.add_argument("--no-write", action="store_true", help="print only; leave BENCHMARKS.md and the results alone")
+    parser.add_argument("--report-only", action="store_true", help="rebuild the BENCHMARKS.md section from stored results")
     args = parser.parse_args()
+    if args.report_only:
+        write_section("scenarios", section(json.loads(RESULTS.read_text())))
+        return
+    if args.scenario is None:
+        parser.error("name a scenario, or pass --report-only")
     scenario = SCENARIOS[args.scenario]
     th.set_num_threads(args.threads)
     stats = json.loads((ROOT / scenario.demo_stats).read_text())

@@ -159,7 +159,8 @@ def test_samples_follow_each_action_dimensions_own_std_and_bounds(uniform):
     actions = sampler(plan, 4000, th.Generator().manual_seed(0))
     # the same draw through per-dimension tensors, the path taken when dimensions differ
     expected = th.randn(actions.shape, generator=th.Generator().manual_seed(0))
-    expected = th.clamp(expected * sampler.noise_std + plan.transpose(0, 1).unsqueeze(2), sampler.action_low, sampler.action_high)
+    expected = expected * sampler.noise_std + plan.transpose(0, 1).unsqueeze(2)
+    expected = th.clamp(expected, sampler.action_low, sampler.action_high)
     assert th.equal(actions, expected)
     assert (actions >= th.as_tensor(low)).all() and (actions <= th.as_tensor(high)).all()
     unclamped_std = actions[:, 0].reshape(-1, 2).std(dim=0)  # env 0, dimension 0 is far from its bounds

@@ -4,9 +4,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from sb3_mpail import MPAIL
 from sb3_mpail.mppi.costs import FeatureSelection
-from sb3_mpail.mppi.dynamics import LearnedDynamics
+from sb3_mpail.mppi.dynamics import LearnedDynamics, PointMassDynamics
+from sb3_mpail.mppi.highway_dynamics import HighwayKinematics, RacetrackKinematics
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -38,3 +41,31 @@ def test_lap_from_one_noisy_partial_demo_trains_with_the_shipped_zoo_entry(tmp_p
     assert isinstance(model.policy.discriminator_features, FeatureSelection)
     assert model.policy.discriminator_features.indices.tolist() == [0, 1, 6, 7]
     assert model.policy.feature_space.shape == (4,) and model.policy.value_net[0].in_features == 12
+
+
+@pytest.mark.parametrize(
+    "env_id, model_class", [("sb3_mpail/Racetrack-v0", RacetrackKinematics), ("sb3_mpail/Highway-v0", HighwayKinematics)]
+)
+def test_road_scenario_trains_with_the_shipped_zoo_entry_through_highway_envs_kinematics(tmp_path, env_id, model_class):
+    pytest.importorskip("highway_env")
+    model = zoo_train(env_id, 400, tmp_path)  # one rollout of 4 envs x 100 steps, one update
+    # no dynamics in the zoo entry: the env's default, highway-env's kinematic bicycle in the observation's units
+    assert type(model.policy.dynamics) is model_class
+
+
+def test_ant_mpail_om_trains_with_the_shipped_zoo_entry_learning_the_27d_model_online(tmp_path):
+    pytest.importorskip("mujoco")
+    model = zoo_train("sb3_mpail/Ant-v0", 800, tmp_path)
+    # MPAIL-OM on the Ant: the planner's model of the 27-D state under the 8-D action was fitted to the agent's steps
+    assert isinstance(model.policy.dynamics, LearnedDynamics)
+    assert model.policy.dynamics.net[0].in_features == 27 + 8
+    assert int(model.policy.dynamics.epochs_trained) > 0
+
+
+def test_point_maze_trains_with_the_shipped_zoo_entry_planning_through_the_wall_free_point_mass(tmp_path):
+    pytest.importorskip("gymnasium_robotics")
+    model = zoo_train("sb3_mpail/PointMaze-v0", 400, tmp_path)
+    assert isinstance(model.policy.dynamics, PointMassDynamics)
+    # the discriminator sees the ball's position and velocity; the value also sees the goal
+    assert model.policy.discriminator_features.indices.tolist() == [0, 1, 2, 3]
+    assert model.policy.value_net[0].in_features == 6

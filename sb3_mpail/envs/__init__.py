@@ -34,3 +34,23 @@ if "sb3_mpail/NavigationLap-v0" not in gym.registry:
 # without highway-env raises an ImportError saying what to install.
 if "sb3_mpail/Parking-v0" not in gym.registry:
     gym.register(id="sb3_mpail/Parking-v0", entry_point="sb3_mpail.envs.highway:FlatParkingEnv")
+
+# gymnasium's MuJoCo Ant-v4 (27-D observation) with 200-step episodes; needs the `scenarios` extra, and making it
+# without mujoco raises an ImportError saying what to install.
+if "sb3_mpail/Ant-v0" not in gym.registry:
+    gym.register(id="sb3_mpail/Ant-v0", entry_point="sb3_mpail.envs.ant:make_ant", max_episode_steps=200)
+
+# gymnasium-robotics' PointMaze U-maze with fixed start and goal cells, flat observation, 20 Hz actions, 100 steps;
+# needs the `scenarios` extra, and making it without gymnasium-robotics raises an ImportError saying what to install.
+if "sb3_mpail/PointMaze-v0" not in gym.registry:
+    gym.register(id="sb3_mpail/PointMaze-v0", entry_point="sb3_mpail.envs.maze:FlatPointMazeEnv", max_episode_steps=100)
+
+# highway-env's racetrack-v0 without other vehicles, observed through the ego car's flat state (200 steps, one lap);
+# needs the `scenarios` extra, and making it without highway-env raises an ImportError saying what to install.
+if "sb3_mpail/Racetrack-v0" not in gym.registry:
+    gym.register(id="sb3_mpail/Racetrack-v0", entry_point="sb3_mpail.envs.highway_roads:EgoRacetrackEnv")
+
+# highway-env's highway-v0 without other vehicles, continuous [acceleration, steering], the same flat ego observation
+# (200 steps at 5 Hz); needs the `scenarios` extra, and making it without highway-env raises an ImportError.
+if "sb3_mpail/Highway-v0" not in gym.registry:
+    gym.register(id="sb3_mpail/Highway-v0", entry_point="sb3_mpail.envs.highway_roads:EgoHighwayEnv")

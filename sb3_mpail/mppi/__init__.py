@@ -9,9 +9,11 @@ from sb3_mpail.mppi.dynamics import (
     LearnedDynamics,
     ParkingKinematics,
     PendulumDynamics,
+    PointMassDynamics,
     TransitionReplayBuffer,
     make_dynamics,
 )
+from sb3_mpail.mppi.highway_dynamics import HighwayKinematics, RacetrackKinematics  # also registers them by name
 from sb3_mpail.mppi.planner import MPPIPlanner, PlanResult
 from sb3_mpail.mppi.sampling import GaussianSampler
 
@@ -20,12 +22,15 @@ __all__ = [
     "DYNAMICS_MODELS",
     "CallableDynamics",
     "GaussianSampler",
+    "HighwayKinematics",
     "KinematicBicycle",
     "LearnedDynamics",
     "MPPIPlanner",
     "ParkingKinematics",
     "PendulumDynamics",
     "PlanResult",
+    "PointMassDynamics",
+    "RacetrackKinematics",
     "TerminalValue",
     "TransitionCost",
     "TransitionReplayBuffer",
