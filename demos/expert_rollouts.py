@@ -1,8 +1,9 @@
 """
-Rollouts shared by the demo scripts: scoring an expert and a random policy, and recording an expert's observations.
-
-Imported by ``make_pendulum_demos.py`` and ``make_cartpole_demos.py``, which run from this folder.
+Rollouts shared by the demo scripts: scoring an expert and a random policy, recording an expert's observations and
+saving them. Imported by the ``make_*_demos.py`` scripts, which run from this folder.
 """
+
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -78,3 +79,21 @@ def record_demos(model: BaseAlgorithm, env_id: str, n_demos: int) -> tuple[list[
         demo_returns.append(ep_return)
     env.close()
     return all_obs, demo_returns
+
+
+def save_demos(episodes: list[np.ndarray], npz_path: Path) -> tuple[int, ...]:
+    """Write observation-only demos in sb3_mpail's ``.npz`` layout.
+
+    :param episodes: Observations per episode, each ``(T_i + 1, obs_dim)``.
+    :param npz_path: The file to write.
+    :return: Shape of the stored ``obs``: ``(n_demos, T + 1, obs_dim)`` when every episode has the same length, else
+        the episodes concatenated, ``(sum_i (T_i + 1), obs_dim)``, stored with their ``episode_lengths``.
+    """
+    lengths = [len(episode) for episode in episodes]
+    if len(set(lengths)) == 1:
+        obs = np.stack(episodes)
+        np.savez_compressed(npz_path, obs=obs)
+    else:
+        obs = np.concatenate(episodes)
+        np.savez_compressed(npz_path, obs=obs, episode_lengths=np.asarray(lengths, dtype=np.int64))
+    return obs.shape

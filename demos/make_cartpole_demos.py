@@ -30,9 +30,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
-from expert_rollouts import evaluate_expert, evaluate_random, record_demos
+from expert_rollouts import evaluate_expert, evaluate_random, record_demos, save_demos
 from stable_baselines3 import PPO
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.utils import get_linear_fn, set_random_seed
@@ -105,14 +104,9 @@ def main() -> None:
 
     episodes, demo_returns = record_demos(model, ENV_ID, args.n_demos)
     npz_path = out_dir / f"cartpole_{args.n_demos}.npz"
+    shape = save_demos(episodes, npz_path)
     lengths = [len(episode) for episode in episodes]
-    if len(set(lengths)) == 1:
-        obs = np.stack(episodes)
-        np.savez_compressed(npz_path, obs=obs)
-    else:
-        obs = np.concatenate(episodes)
-        np.savez_compressed(npz_path, obs=obs, episode_lengths=np.asarray(lengths, dtype=np.int64))
-    print(f"saved demos {obs.shape} (episode lengths {lengths}) to {npz_path}; demo returns: {demo_returns}")
+    print(f"saved demos {shape} (episode lengths {lengths}) to {npz_path}; demo returns: {demo_returns}")
 
     meta: dict[str, Any] = {
         "env_id": ENV_ID,

@@ -27,7 +27,7 @@ from typing import Any, Dict, Optional, Tuple
 
 import gymnasium as gym
 import numpy as np
-from expert_rollouts import evaluate_random, record_demos
+from expert_rollouts import evaluate_random, record_demos, save_demos
 
 from sb3_mpail.envs.maze import POINT_MAZE_ID, point_maze_figures
 
@@ -113,10 +113,9 @@ def main() -> None:
     print(f"random return: {random_mean:.2f} +/- {random_std:.2f}")
 
     episodes, demo_returns = record_demos(expert, ENV_ID, args.n_demos)
-    obs = np.stack(episodes)
     npz_path = out_dir / f"pointmaze_{args.n_demos}.npz"
-    np.savez_compressed(npz_path, obs=obs)
-    print(f"saved demos {obs.shape} to {npz_path}; demo returns: {demo_returns}")
+    shape = save_demos(episodes, npz_path)
+    print(f"saved demos {shape} to {npz_path}; demo returns: {demo_returns}")
 
     meta: Dict[str, Any] = {
         "env_id": ENV_ID,

@@ -30,9 +30,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
-from expert_rollouts import evaluate_expert, evaluate_random, record_demos
+from expert_rollouts import evaluate_expert, evaluate_random, record_demos, save_demos
 from stable_baselines3 import SAC
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.utils import set_random_seed
@@ -88,10 +87,9 @@ def main() -> None:
     print(f"random return: {random_mean:.1f} +/- {random_std:.1f}")
 
     episodes, demo_returns = record_demos(model, ENV_ID, args.n_demos)
-    obs = np.stack(episodes)
     npz_path = out_dir / f"pendulum_{args.n_demos}.npz"
-    np.savez_compressed(npz_path, obs=obs)
-    print(f"saved demos {obs.shape} to {npz_path}; demo returns: {[round(r, 1) for r in demo_returns]}")
+    shape = save_demos(episodes, npz_path)
+    print(f"saved demos {shape} to {npz_path}; demo returns: {[round(r, 1) for r in demo_returns]}")
 
     meta: dict[str, Any] = {
         "env_id": ENV_ID,

@@ -30,7 +30,7 @@ from typing import Any, NamedTuple, Optional
 
 import gymnasium as gym
 import numpy as np
-from expert_rollouts import evaluate_expert, evaluate_random, record_demos
+from expert_rollouts import evaluate_expert, evaluate_random, record_demos, save_demos
 
 import sb3_mpail.envs  # noqa: F401  (registers the road scenarios)
 from sb3_mpail.envs.highway_roads import EGO_SCALES
@@ -111,11 +111,10 @@ def main() -> None:
     print(f"driver return: {expert_mean:.1f} +/- {expert_std:.1f}; random return: {random_mean:.1f} +/- {random_std:.1f}")
 
     episodes, demo_returns = record_demos(driver, scenario.env_id, args.n_demos)
-    obs = np.stack(episodes)  # no crashes without other vehicles: every episode lasts the time limit
     args.out_dir.mkdir(parents=True, exist_ok=True)
     npz_path = args.out_dir / f"{args.scenario}_{args.n_demos}.npz"
-    np.savez_compressed(npz_path, obs=obs)
-    print(f"saved demos {obs.shape} to {npz_path}; demo returns: {demo_returns}")
+    shape = save_demos(episodes, npz_path)  # no crashes without other vehicles: every episode lasts the time limit
+    print(f"saved demos {shape} to {npz_path}; demo returns: {demo_returns}")
 
     meta: dict[str, Any] = {
         "env_id": scenario.env_id,
