@@ -75,7 +75,7 @@ def plot_ood(per_seed: List[Dict[str, np.ndarray]], seeds: List[int], radius: fl
     :param path: where to write the PNG
     :return: the path written
     """
-    from sb3_mpail.plotting import import_pyplot
+    from sb3_mpail.plotting import import_pyplot, save_figure
 
     plt = import_pyplot()
     figure, (left, right) = plt.subplots(1, 2, figsize=(14, 6.5), constrained_layout=True)
@@ -113,10 +113,7 @@ def plot_ood(per_seed: List[Dict[str, np.ndarray]], seeds: List[int], radius: fl
     right.grid(alpha=0.3)
     right.legend(fontsize=8)
     right.set_title("final distance against start distance, all models")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
-    return path
+    return save_figure(figure, path)
 
 
 def main() -> None:

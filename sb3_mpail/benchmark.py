@@ -382,7 +382,7 @@ def plot_curves(results: List[Dict[str, Any]], env_id: str, n_demos: int, path: 
     :param path: the PNG to write
     :return: the path, or ``None`` when there is nothing to plot
     """
-    from sb3_mpail.plotting import import_pyplot
+    from sb3_mpail.plotting import import_pyplot, save_figure
 
     runs = [r for r in results if r["env_id"] == env_id and r["n_demos"] == n_demos]
     if not runs:
@@ -410,10 +410,7 @@ def plot_curves(results: List[Dict[str, Any]], env_id: str, n_demos: int, path: 
     axis.set_title(f"{env_id}, {n_demos} demos")
     axis.grid(alpha=0.3)
     axis.legend(loc="best", fontsize=8)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
-    return path
+    return save_figure(figure, path)
 
 
 def plot_lap_curves(results: List[Dict[str, Any]], path: Path, scenario_mpail: bool = True) -> Optional[Path]:
@@ -427,7 +424,7 @@ def plot_lap_curves(results: List[Dict[str, Any]], path: Path, scenario_mpail: b
         curve is kept for them) as dashed lines at their budget
     :return: the path, or ``None`` when there is nothing to plot
     """
-    from sb3_mpail.plotting import import_pyplot
+    from sb3_mpail.plotting import import_pyplot, save_figure
 
     if not results:
         return None
@@ -450,10 +447,7 @@ def plot_lap_curves(results: List[Dict[str, Any]], path: Path, scenario_mpail: b
     axis.set_title(f"{LAP}, one seed per line")
     axis.grid(alpha=0.3)
     axis.legend(loc="best", fontsize=8)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
-    return path
+    return save_figure(figure, path)
 
 
 def plot_ood(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int, path: Path) -> Optional[Path]:
@@ -467,7 +461,7 @@ def plot_ood(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int, 
     :param path: the PNG to write
     :return: the path, or ``None`` when there is nothing to plot
     """
-    from sb3_mpail.plotting import import_pyplot
+    from sb3_mpail.plotting import import_pyplot, save_figure
 
     panels = [(a, [r for r in results if r["env_id"] == NAVIGATION and r["algo"] == a and r["n_demos"] == n_demos
                    and "ood" in r]) for a in algos]  # fmt: skip
@@ -485,10 +479,7 @@ def plot_ood(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int, 
         axis.plot(10, 10, "r*", ms=12)
         axis.set(xlim=(-30, 30), ylim=(-30, 30), aspect="equal", title=f"{ALGO_LABELS[algo]}\n{len(runs)} seeds")
     figure.colorbar(points, ax=axes[0].tolist(), label="final reward")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
-    return path
+    return save_figure(figure, path)
 
 
 def write_report(

@@ -29,6 +29,15 @@ def import_pyplot():
     return plt
 
 
+def save_figure(figure, path: Union[str, Path]) -> Path:
+    """Writes ``figure`` to ``path`` as a PNG (creating its folder) and closes it; returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=100)
+    import_pyplot().close(figure)
+    return path
+
+
 def typical_demo_speed(demo_observations: np.ndarray) -> float:
     """The median forward speed (observation index 6) of the demo states in which the car is moving (> 0.5 m/s)."""
     speeds = np.asarray(demo_observations)[..., 6].ravel()
@@ -139,11 +148,7 @@ def plot_navigation(
     )
     if title:
         figure.suptitle(title)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
-    return path
+    return save_figure(figure, path)
 
 
 def plot_learning_curves(
@@ -179,8 +184,4 @@ def plot_learning_curves(
     axis.set_title(title)
     axis.grid(alpha=0.3)
     axis.legend(loc="lower right")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
-    return path
+    return save_figure(figure, path)
