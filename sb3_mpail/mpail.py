@@ -201,8 +201,12 @@ class MPAIL(BaseAlgorithm):
         expert = load_demos(demos, self.observation_space)
         with th.no_grad():
             self.expert = ExpertTransitions(
-                *(self.policy.features(th.as_tensor(array)).cpu().numpy() for array in expert)
+                *(self.policy.features(self._tensor(array)).cpu().numpy() for array in expert)
             )
+
+    def _tensor(self, array: np.ndarray) -> th.Tensor:
+        """A float array as a float32 tensor on the model's device: the networks are float32 whatever the env's dtype."""
+        return th.as_tensor(array, dtype=th.float32, device=self.device)
 
     def temperature(self) -> float:
         """The MPPI temperature after the episodes completed so far."""
@@ -302,7 +306,7 @@ class MPAIL(BaseAlgorithm):
             fresh = th.as_tensor(self._last_episode_starts, device=self.device).view(-1, 1, 1)
             self._plan = th.where(fresh, self.policy.initial_plan(env.num_envs), self._plan)
             with th.no_grad():
-                actions, self._plan = self.policy.act(th.as_tensor(self._last_obs, device=self.device), self._plan)
+                actions, self._plan = self.policy.act(self._tensor(self._last_obs), self._plan)
             actions = actions.cpu().numpy()
             new_obs, _, dones, infos = env.step(actions)
             self.num_timesteps += env.num_envs
@@ -330,15 +334,15 @@ class MPAIL(BaseAlgorithm):
         buffer = self.rollout_buffer
         shape = (buffer.buffer_size, buffer.n_envs)
         with th.no_grad():
-            observations = th.as_tensor(buffer.flat("observations"), device=self.device)
-            next_observations = th.as_tensor(buffer.flat("next_observations"), device=self.device)
+            observations = self._tensor(buffer.flat("observations"))
+            next_observations = self._tensor(buffer.flat("next_observations"))
             rewards = self.policy.discriminator(
                 self.policy.features(observations), None, self.policy.features(next_observations), None
             )
             next_values = self.policy.value_net(next_observations).squeeze(-1)
             values = self.policy.value_net(observations).squeeze(-1)
-            last_values = self.policy.value_net(th.as_tensor(last_obs, device=self.device)).squeeze(-1)
-        timeouts = th.as_tensor(buffer.flat("timeouts"), device=self.device)
+            last_values = self.policy.value_net(self._tensor(last_obs)).squeeze(-1)
+        timeouts = self._tensor(buffer.flat("timeouts"))
         # a time-limit cut is not a real end: bootstrap it with the value of the state reached, as SB3's PPO does
         buffer.rewards = (rewards + self.gamma * next_values * timeouts).cpu().numpy().reshape(shape)
         buffer.values = values.cpu().numpy().reshape(shape)
@@ -353,8 +357,8 @@ class MPAIL(BaseAlgorithm):
         """Discriminator update (every ``discriminator_update_interval`` iterations), value update, dynamics fit."""
         self.policy.set_training_mode(True)
         buffer = self.rollout_buffer
-        observations = th.as_tensor(buffer.flat("observations"), device=self.device)
-        next_observations = th.as_tensor(buffer.flat("next_observations"), device=self.device)
+        observations = self._tensor(buffer.flat("observations"))
+        next_observations = self._tensor(buffer.flat("next_observations"))
         # a rollout cut short by the budget holds only the start of each episode: too biased an agent sample to
         # train the discriminator on (it lowered the final navigation score by 0.1-0.2 in every seed tried)
         whole_rollout = buffer.buffer_size == self.n_steps
@@ -374,8 +378,8 @@ class MPAIL(BaseAlgorithm):
     def _train_discriminator(self, observations: th.Tensor, next_observations: th.Tensor) -> None:
         """BCE on logits, expert transitions labelled 1 and the agent's 0, each agent batch with as many expert pairs."""
         assert self.expert is not None
-        expert_observations = th.as_tensor(self.expert.observations, device=self.device)
-        expert_next_observations = th.as_tensor(self.expert.next_observations, device=self.device)
+        expert_observations = self._tensor(self.expert.observations)
+        expert_next_observations = self._tensor(self.expert.next_observations)
         discriminator = self.policy.discriminator
         with th.no_grad():
             agent_features, agent_next_features = self.policy.features(observations), self.policy.features(next_observations)
@@ -404,8 +408,8 @@ class MPAIL(BaseAlgorithm):
     def _train_value(self, observations: th.Tensor) -> None:
         """Clipped regression of ``V_phi`` onto the GAE returns, as PPO's value loss."""
         buffer = self.rollout_buffer
-        returns = th.as_tensor(buffer.flat("returns"), device=self.device)
-        old_values = th.as_tensor(buffer.flat("values"), device=self.device)
+        returns = self._tensor(buffer.flat("returns"))
+        old_values = self._tensor(buffer.flat("values"))
         losses = []
         for _ in range(self.n_epochs):
             for batch in self._minibatches(len(observations)):

@@ -252,3 +252,24 @@ def test_deterministic_predictions_during_training_leave_the_learning_unchanged(
         models.append(model.learn(24, reset_num_timesteps=False))
     for (name, a), (_, b) in zip(models[0].policy.state_dict().items(), models[1].policy.state_dict().items()):
         assert th.equal(a, b), name
+
+
+class Float64Observation(gym.ObservationWrapper):
+    """The env's observations and observation space in float64, as gymnasium's MuJoCo envs give them."""
+
+    def __init__(self, env: gym.Env):
+        super().__init__(env)
+        space = env.observation_space
+        self.observation_space = gym.spaces.Box(space.low.astype(np.float64), space.high.astype(np.float64), dtype=np.float64)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        return observation.astype(np.float64)
+
+
+def test_float64_observations_train_and_plan_in_float32(demos):
+    env = make_vec_env("Pendulum-v1", n_envs=2, seed=0, wrapper_class=Float64Observation)
+    assert env.observation_space.dtype == np.float64
+    model = MPAIL("MlpMPPI", env, demos, n_steps=16, seed=0, policy_kwargs=dict(TINY_PLANNER, dynamics="learned"))
+    model.learn(64)
+    actions, plan = model.predict(env.reset(), deterministic=True)
+    assert actions.shape == (2, 1) and np.isfinite(actions).all() and plan.dtype == np.float32
