@@ -495,13 +495,14 @@ def write_report(
 ) -> None:
     """
     Writes one BENCHMARKS.md section per env grid (``baselines-<grid name>``; navigation also
-    ``baselines-<grid name>-ood``) and the figures, from every result of the grid found.
+    ``baselines-<grid name>-ood``) and the figures, from every result of the grid found: its rows are the algorithms
+    and demo counts asked for and any others with stored results.
 
     :param results_dir: the grid's folder
     :param envs: env ids or short names
-    :param algos: table rows
-    :param demos: demo counts
-    :param n_seeds: seeds asked for
+    :param algos: table rows (at least)
+    :param demos: demo counts (at least)
+    :param n_seeds: seeds asked for (at least)
     :param command: the command line to quote
     :param timesteps: the budget override, or ``None``
     :param report_file: the markdown file
@@ -511,31 +512,35 @@ def write_report(
         env_id = env_id_of(env)
         name, stats = grid_name(env_id, timesteps), expert_stats(env_id)
         results = load_results(results_dir, name)
+        # every stored result of the grid, not only the runs asked for now: a partial rerun keeps the other rows
+        grid_algos = [algo for algo in ALGOS if algo in algos or any(r["algo"] == algo for r in results)]
+        grid_demos = sorted(set(demos) | {r["n_demos"] for r in results})
+        grid_seeds = max([n_seeds] + [r["seed"] + 1 for r in results])
         if env_id == LAP:
-            section = lap_report(results, stats, algos, demos, n_seeds, command, scenario_mpail=timesteps is None)
+            section = lap_report(results, stats, grid_algos, grid_demos, grid_seeds, command, scenario_mpail=timesteps is None)
             figure = plot_lap_curves(results, figures_dir / f"baselines_{name}.png", scenario_mpail=timesteps is None)
             if figure is not None:
                 section += f"\n\n![{env_id}](benchmarks/figures/{figure.name})"
             write_section(f"baselines-{name}", section, report_file)
             continue
-        budgets = {algo: sorted({r["n_timesteps"] for r in results if r["algo"] == algo}) for algo in algos}
-        figures = [plot_curves(results, env_id, n, figures_dir / f"baselines_{name}_{n}demos.png") for n in demos]
+        budgets = {algo: sorted({r["n_timesteps"] for r in results if r["algo"] == algo}) for algo in grid_algos}
+        figures = [plot_curves(results, env_id, n, figures_dir / f"baselines_{name}_{n}demos.png") for n in grid_demos]
         lines = [
             f"## Baselines on {env_id}",
             "",
             f"Normalised score = (R - random) / (expert - random), random {stats['random_return_mean']:.1f}, expert "
             f"{stats['expert_return_mean']:.1f} ({stats['expert_algo']}); final deterministic evaluation on "
             f"episodes from fixed seeds; mean ± 95% CI (Student's t) over seeds. Env-step budgets: "
-            + ", ".join(f"{ALGO_LABELS[a]} {'/'.join(map(str, budgets[a])) or '-'}" for a in algos)
+            + ", ".join(f"{ALGO_LABELS[a]} {'/'.join(map(str, budgets[a])) or '-'}" for a in grid_algos)
             + " (zoo_configs/<algo>.yml unless `--timesteps` overrides them). BC uses the expert's actions and no env "
             "steps; IRL-MPC's env steps are its GAIL run's. Learning curves are evaluated once the env-step count passes "
             "each multiple of `--eval-every` (default a tenth of the budget), after whole rollouts or rounds, so env "
             "steps to 0.9 are resolved to that grid.",
             "",
-            grid_table(results, env_id, algos, demos, n_seeds),
+            grid_table(results, env_id, grid_algos, grid_demos, grid_seeds),
             "",
         ]
-        for n_demos in demos:
+        for n_demos in grid_demos:
             mpail, gail = ([r for r in results if r["env_id"] == env_id and r["algo"] == a and r["n_demos"] == n_demos]
                            for a in ("mpail", "gail"))  # fmt: skip
             if mpail and gail:
@@ -545,8 +550,8 @@ def write_report(
         lines += ["", f"Command: `{command}` on {machine_description()}."]
         write_section(f"baselines-{name}", "\n".join(lines), report_file)
         if env_id == NAVIGATION:
-            n_ood = 4 if 4 in demos else demos[0]
-            figure = plot_ood(results, algos, n_ood, figures_dir / f"baselines_{name}_ood.png")
+            n_ood = 4 if 4 in grid_demos else grid_demos[0]
+            figure = plot_ood(results, grid_algos, n_ood, figures_dir / f"baselines_{name}_ood.png")
             ood = [
                 "## Navigation out of distribution" + ("" if timesteps is None else f" ({timesteps} env steps)"),
                 "",
@@ -555,7 +560,7 @@ def write_report(
                 f"`start_region='ood'`, seeds {OOD_SEED}+). Goal reached = the episode ends within {GOAL_RADIUS:.0f} m "
                 "of (10, 10); final reward = sqrt(200) - final distance. Means ± 95% CI over seeds.",
                 "",
-                ood_table(results, algos, n_ood),
+                ood_table(results, grid_algos, n_ood),
                 "",
             ]
             if figure is not None:

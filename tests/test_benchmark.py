@@ -63,6 +63,10 @@ def test_a_second_invocation_trains_nothing(tmp_path, monkeypatch, capsys):
     assert (results / "pendulum" / "bc_4demos_seed0.json").read_text() == before
     main([*arguments[:7], "2", *arguments[8:], "--report-only"])  # a second seed asked for, not run
     assert "| BC (uses expert actions) | 4 | 1/2 **incomplete** |" in (tmp_path / "B.md").read_text()
+    # a report for other algorithms keeps the stored BC row: a partial rerun must not drop the rest of the grid
+    main([*arguments[:3], "gail", *arguments[4:], "--report-only"])
+    text = (tmp_path / "B.md").read_text()
+    assert "| BC (uses expert actions) | 4 | 1/1 |" in text and "| GAIL (state-only) | 4 | 0/1 **incomplete** |" in text
     monkeypatch.undo()
     main([*arguments, "--timesteps", "5"])  # overridden budgets are a grid of their own, reported apart
     assert (results / "pendulum_5steps" / "bc_4demos_seed0.json").exists()
