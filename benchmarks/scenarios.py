@@ -34,7 +34,6 @@ import numpy as np
 import torch as th
 import yaml
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 
 import sb3_mpail.envs  # noqa: F401  (registers the package's envs)
 from benchmarks.report import machine_description, write_section
@@ -43,6 +42,7 @@ from sb3_mpail.demos import normalised_score
 from sb3_mpail.envs.ant import evaluate_ant
 from sb3_mpail.envs.lap import lap_metrics
 from sb3_mpail.envs.maze import point_maze_figures
+from sb3_mpail.evaluation import deterministic_episode_returns
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "figures" / "scenarios.json"
@@ -54,8 +54,7 @@ EVAL_SEED = 10_000
 
 def cartpole_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, float]:
     """Mean return of the deterministic planner and its normalised score."""
-    eval_env = make_vec_env("sb3_mpail/ContinuousCartPole-v0", n_envs=n_episodes, seed=EVAL_SEED)
-    returns, _ = evaluate_policy(model, eval_env, n_eval_episodes=n_episodes, deterministic=True, return_episode_rewards=True)
+    returns = deterministic_episode_returns(model, "sb3_mpail/ContinuousCartPole-v0", n_episodes, EVAL_SEED, n_episodes)
     mean_return = float(np.mean(returns))
     return {"return": mean_return, "score": normalised_score(mean_return, stats)}
 
@@ -94,16 +93,13 @@ def parking_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, flo
     parked and crashed. The success rate is the figure that says whether it parks: a crash costs only 5 and ends
     the episode, so crashing early returns more than driving around for the 100 s limit.
     """
-    eval_env = make_vec_env("sb3_mpail/Parking-v0", n_envs=n_episodes, seed=EVAL_SEED)
     endings: List[Dict] = []
 
-    def record_ending(local: Dict, _: Dict) -> None:  # evaluate_policy's per-env, per-step callback
-        if local["done"]:
-            endings.append(local["info"])
+    def record_ending(info: Dict, done: bool) -> None:
+        if done:
+            endings.append(info)
 
-    returns, _ = evaluate_policy(
-        model, eval_env, n_eval_episodes=n_episodes, deterministic=True, return_episode_rewards=True, callback=record_ending
-    )
+    returns = deterministic_episode_returns(model, "sb3_mpail/Parking-v0", n_episodes, EVAL_SEED, n_episodes, record_ending)
     mean_return = float(np.mean(returns))
     return {
         "return": mean_return,
@@ -127,17 +123,14 @@ def road_figures(env_id: str, model: MPAIL, stats: Dict, n_episodes: int) -> Dic
     penalty; highway: speed and rightmost lane; up to 1 per step, 0 off the road), its normalised score, the share of
     steps on which the car is on the road and its mean speed.
     """
-    eval_env = make_vec_env(env_id, n_envs=n_episodes, seed=EVAL_SEED)
     on_road: List[bool] = []
     speeds: List[float] = []
 
-    def record_step(local: Dict, _: Dict) -> None:  # evaluate_policy's per-env, per-step callback
-        on_road.append(bool(local["info"]["rewards"]["on_road_reward"]))
-        speeds.append(float(local["info"]["speed"]))
+    def record_step(info: Dict, _: bool) -> None:
+        on_road.append(bool(info["rewards"]["on_road_reward"]))
+        speeds.append(float(info["speed"]))
 
-    returns, _ = evaluate_policy(
-        model, eval_env, n_eval_episodes=n_episodes, deterministic=True, return_episode_rewards=True, callback=record_step
-    )
+    returns = deterministic_episode_returns(model, env_id, n_episodes, EVAL_SEED, n_episodes, record_step)
     mean_return = float(np.mean(returns))
     return {
         "return": mean_return,

@@ -14,8 +14,8 @@ from typing import Any, Dict, List
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
+
+from sb3_mpail.evaluation import deterministic_episode_returns
 
 ANT_FORWARD_VELOCITY_INDEX = 13
 MUJOCO_INSTALL_HINT = 'pip install -e ".[scenarios]" (from the repository root) or pip install mujoco==2.3.7'
@@ -75,17 +75,12 @@ def evaluate_ant(model: Any, n_episodes: int, seed: int, n_envs: int = 1) -> Dic
     :return: ``return`` and ``return_std`` over the episodes, and ``forward_speed``: the torso's x velocity (m/s)
         averaged over every step of every episode
     """
-    eval_env = make_vec_env("sb3_mpail/Ant-v0", n_envs=n_envs, seed=seed)
     forward_velocities: List[float] = []
 
-    def record_forward_velocity(local_variables: Dict[str, Any], _: Dict[str, Any]) -> None:
-        forward_velocities.append(float(local_variables["info"]["x_velocity"]))
+    def record_forward_velocity(info: Dict[str, Any], _: bool) -> None:
+        forward_velocities.append(float(info["x_velocity"]))
 
-    returns, _ = evaluate_policy(
-        model, eval_env, n_eval_episodes=n_episodes, deterministic=True, return_episode_rewards=True,
-        callback=record_forward_velocity,
-    )
-    eval_env.close()
+    returns = deterministic_episode_returns(model, "sb3_mpail/Ant-v0", n_episodes, seed, n_envs, record_forward_velocity)
     return {
         "return": float(np.mean(returns)),
         "return_std": float(np.std(returns)),

@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING, Any, Dict, List, Optional, Tuple, Union
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.type_aliases import PolicyPredictor
+
+from sb3_mpail.evaluation import deterministic_episode_returns
 
 if TYPE_CHECKING:
     from gymnasium_robotics.envs.maze.maze_v4 import Maze
@@ -137,19 +137,15 @@ def point_maze_figures(model: PolicyPredictor, n_episodes: int, seed: int) -> Di
     :return: ``return`` (mean episode return), ``success`` (fraction of episodes ending within PointMaze's 0.45 m
         of the goal) and ``wall_steps`` (fraction of steps in which the ball touched a wall)
     """
-    env = make_vec_env(POINT_MAZE_ID, n_envs=1, seed=seed)
     wall_contacts: List[bool] = []
     successes: List[bool] = []
 
-    def record(local_variables: Dict[str, Any], _: Dict[str, Any]) -> None:
-        wall_contacts.append(local_variables["info"]["wall_contact"])
-        if local_variables["done"]:
-            successes.append(local_variables["info"]["success"])
+    def record(info: Dict[str, Any], done: bool) -> None:
+        wall_contacts.append(info["wall_contact"])
+        if done:
+            successes.append(info["success"])
 
-    returns, _ = evaluate_policy(
-        model, env, n_eval_episodes=n_episodes, deterministic=True, return_episode_rewards=True, callback=record
-    )
-    env.close()
+    returns = deterministic_episode_returns(model, POINT_MAZE_ID, n_episodes, seed, on_step=record)
     return {
         "return": float(np.mean(returns)),
         "success": float(np.mean(successes)),
