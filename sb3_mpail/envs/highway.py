@@ -32,6 +32,18 @@ def require_highway_env() -> None:
         raise ImportError(f"This scenario needs highway-env, which is not installed: {SCENARIOS_INSTALL_HINT}") from error
 
 
+def vehicle_features(vehicle: Any, scales: np.ndarray) -> np.ndarray:
+    """
+    A highway-env vehicle's ``PARKING_FEATURES`` (``[x, y, vx, vy, cos h, sin h]``) divided by ``scales``, in float64:
+    the values of its ``Kinematics`` observation row (absolute, not normalised), read with numpy instead of from a
+    pandas DataFrame of its ``to_dict``.
+
+    :param vehicle: a highway-env vehicle
+    :param scales: one scale per feature
+    """
+    return np.concatenate((vehicle.position, vehicle.velocity, vehicle.direction)) / scales
+
+
 @functools.cache
 def numpy_observation_parking_env() -> type:
     """
@@ -54,7 +66,7 @@ def numpy_observation_parking_env() -> type:
             if not vehicle:
                 return super().observe()
             # to_dict's x, y, vx, vy, cos_h, sin_h; the goal (a Landmark) has zero speed, so zero velocity
-            observation = np.concatenate((vehicle.position, vehicle.velocity, vehicle.direction)) / self.scales
+            observation = vehicle_features(vehicle, self.scales)
             goal = vehicle.goal
             desired_goal = np.array([*goal.position, 0.0, 0.0, np.cos(goal.heading), np.sin(goal.heading)]) / self.scales
             return {"observation": observation, "achieved_goal": observation.copy(), "desired_goal": desired_goal}

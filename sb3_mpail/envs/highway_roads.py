@@ -26,7 +26,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from sb3_mpail.envs.highway import PARKING_FEATURES, require_highway_env
+from sb3_mpail.envs.highway import PARKING_FEATURES, require_highway_env, vehicle_features
 
 EGO_FEATURES = PARKING_FEATURES
 EGO_SCALES = np.array([10.0, 10.0, 10.0, 10.0, 1.0, 1.0])
@@ -52,7 +52,7 @@ def ego_observation(vehicle: Any, dtype: type = np.float32) -> np.ndarray:
     :param vehicle: a highway-env vehicle
     :param dtype: dtype of the result
     """
-    return (np.concatenate((vehicle.position, vehicle.velocity, vehicle.direction)) / EGO_SCALES).astype(dtype)
+    return vehicle_features(vehicle, EGO_SCALES).astype(dtype)
 
 
 class EgoRoadEnv(gym.Env):
