@@ -249,7 +249,7 @@ class ParkingKinematics(nn.Module):
         """
         horizon, n_envs, n_samples, _ = actions.shape
         states, columns = feature_major_states(initial_states, actions)
-        columns[6:, 1:] = initial_states.t()[6:, None, :, None]  # the goal is held
+        hold_(columns, slice(6, None))  # the goal
         # Time is the last dimension here, (n_envs, n_samples, H * substeps): torch's CPU cumsum is about 10x
         # faster along it than along the first. Simulation step k runs the action of env step k // substeps.
         actions = actions.clamp(-1.0, 1.0).permute(1, 2, 0, 3)
