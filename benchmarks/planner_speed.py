@@ -35,6 +35,7 @@ PAPER_SETTINGS = dict(n_samples=512, horizon=10, n_iterations=5)
 TEMPERATURE = 0.1
 IMPLEMENTATIONS = {
     "sb3-mpail": "sb3-mpail (batched, fused)",
+    "blas": "sb3-mpail, BLAS hidden layers (oneDNN off)",
     "compiled": "sb3-mpail + torch.compile",
     "cuda-graphs": "sb3-mpail + torch.compile(reduce-overhead) (CUDA graphs)",
     "reference": "plain reference implementation",
@@ -66,6 +67,10 @@ def random_states(n_envs: int, device: str) -> th.Tensor:
 
 def planning_step_sb3_mpail(n_envs: int, device: str, implementation: str) -> Callable[[], None]:
     compile_planner = {"compiled": True, "cuda-graphs": "reduce-overhead"}.get(implementation, False)
+    if implementation == "blas":  # each case runs in its own process: switching the fast path off here is local
+        from sb3_mpail.mppi import fused
+
+        fused.ONEDNN_LINEAR = None
     policy = make_policy(device, compile_planner)
     planner = policy.planner
     plan_once = planner.reference_forward if implementation == "reference" else planner.forward
@@ -199,6 +204,7 @@ def cases(args: argparse.Namespace) -> List[tuple]:
     planned = []
     for device in args.devices:
         implementations = ["sb3-mpail", "reference"] + (["pytorch_mppi"] if not args.no_pytorch_mppi else [])
+        implementations += ["blas"] if device == "cpu" and th.backends.mkldnn.is_available() else []
         implementations += ["compiled"] if args.compile else []
         implementations += ["cuda-graphs"] if device == "cuda" else []
         for threads in args.threads if device == "cpu" else args.threads[:1]:

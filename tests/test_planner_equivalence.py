@@ -77,7 +77,10 @@ def test_bicycle_plans_match_the_reference(n_envs):
     assert th.all(optimised[-1][1] > 0.01)  # the weights are not degenerate: the comparison is not vacuous
 
 
-def test_float32_plans_at_the_paper_settings_match_the_reference():
+@pytest.mark.parametrize("onednn", [True, False])
+def test_float32_plans_at_the_paper_settings_match_the_reference(monkeypatch, onednn):
+    if not onednn:  # the BLAS path that machines without oneDNN (and GPUs) take
+        monkeypatch.setattr(fused, "ONEDNN_LINEAR", None)
     policy = make_policy(NAVIGATION, "bicycle", dtype=th.float32)  # N = 512, H = 10, J = 5
     policy.temperature.fill_(1.0)
     assert_same_plans(*plan_both_ways(policy, navigation_states(4, dtype=th.float32)), atol=1e-5)
@@ -113,6 +116,25 @@ def test_cache_sized_chunks_match_the_reference(monkeypatch, chunk_rows):
     monkeypatch.setattr(fused, "chunk_rows", lambda: chunk_rows)
     policy = make_policy(NAVIGATION, "bicycle", n_samples=200)
     assert_same_plans(*plan_both_ways(policy, navigation_states(3)))
+
+
+def test_torch_builds_with_onednn_give_the_fused_linear():
+    # the op is private to torch: a torch upgrade that drops it must fail here rather than silently plan slower
+    assert (fused.ONEDNN_LINEAR is not None) == th.backends.mkldnn.is_available()
+
+
+@pytest.mark.parametrize("activation", [th.nn.ReLU(), th.nn.LeakyReLU(0.2), th.nn.Tanh()])
+@pytest.mark.parametrize("onednn", [True, False])
+def test_frozen_hidden_layers_match_the_module(monkeypatch, activation, onednn):
+    if not onednn:
+        monkeypatch.setattr(fused, "ONEDNN_LINEAR", None)
+    th.manual_seed(0)
+    network = th.nn.Sequential(th.nn.Linear(5, 16), activation, th.nn.Linear(16, 8), activation, th.nn.Linear(8, 1)).eval()
+    inputs = th.randn(300, 5)
+    frozen = fused.freeze_mlp(network)
+    with th.no_grad():
+        values = fused.FusedValue(frozen)(inputs, fused.Workspace())
+        assert th.allclose(values, network(inputs)[:, 0], atol=1e-5, rtol=0)
 
 
 def test_fused_views_are_used_only_when_planning():
