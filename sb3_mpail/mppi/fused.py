@@ -49,6 +49,9 @@ def _onednn_linear() -> Optional[Callable]:
 
 #: ``linear(input, weight, bias, activation, activation_scalars, algorithm)``, or ``None`` to use BLAS everywhere
 ONEDNN_LINEAR: Optional[Callable] = _onednn_linear()
+#: fewest rows per torch thread oneDNN is used for: a layer of 8192 x 32 x 32 takes it half BLAS's time, but one of
+#: 512 rows twice BLAS's, and at 2 threads a planning step of 1 env (5120-row chunks) was 10% slower with it
+ONEDNN_MIN_ROWS_PER_THREAD = 4096
 
 
 class Workspace:
@@ -159,13 +162,19 @@ def _hidden_layers(
 ) -> th.Tensor:
     """
     Layers ``first_layer .. last_layer - 1`` of ``mlp`` on 2-D ``hidden``: one oneDNN call per layer with bias and
-    activation fused on contiguous CPU float32 rows (each returns a fresh tensor; strided rows stay on BLAS, which
-    reads them in place where oneDNN would copy them), else a BLAS ``addmm`` into two ping-ponged scratch tensors and
-    the activation in place.
+    activation fused on contiguous CPU float32 rows, ``ONEDNN_MIN_ROWS_PER_THREAD`` or more per thread (each call
+    returns a fresh tensor; strided rows stay on BLAS, which reads them in place where oneDNN would copy them), else a
+    BLAS ``addmm`` into two ping-ponged scratch tensors and the activation in place.
     """
     for index in range(first_layer, last_layer):
         activation = mlp.activations[index]
-        if ONEDNN_LINEAR is not None and hidden.is_contiguous() and hidden.device.type == "cpu" and hidden.dtype == th.float32:
+        if (
+            ONEDNN_LINEAR is not None
+            and hidden.shape[0] >= ONEDNN_MIN_ROWS_PER_THREAD * th.get_num_threads()
+            and hidden.is_contiguous()
+            and hidden.device.type == "cpu"
+            and hidden.dtype == th.float32
+        ):
             name, scalars = ("none", []) if activation is None else (activation.onednn_name, list(activation.onednn_scalars))
             hidden = ONEDNN_LINEAR(hidden, mlp.weights[index].t(), mlp.biases[index], name, scalars, "")
             continue
