@@ -1,9 +1,11 @@
 """
 Rollouts shared by the demo scripts: scoring an expert and a random policy, recording an expert's observations and
-saving them. Imported by the ``make_*_demos.py`` scripts, which run from this folder.
+saving them with their metadata. Imported by the ``make_*_demos.py`` scripts, which run from this folder.
 """
 
+import json
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -97,3 +99,13 @@ def save_demos(episodes: list[np.ndarray], npz_path: Path) -> tuple[int, ...]:
         obs = np.concatenate(episodes)
         np.savez_compressed(npz_path, obs=obs, episode_lengths=np.asarray(lengths, dtype=np.int64))
     return obs.shape
+
+
+def save_metadata(meta: dict[str, Any], json_path: Path) -> None:
+    """Write the demos' metadata (expert and random returns, settings, command) as indented JSON.
+
+    :param meta: The metadata.
+    :param json_path: The file to write.
+    """
+    json_path.write_text(json.dumps(meta, indent=2) + "\n")
+    print(f"saved metadata to {json_path}")

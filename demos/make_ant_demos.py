@@ -30,7 +30,6 @@ Run from the repository root::
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -38,7 +37,7 @@ from typing import Any, Optional
 
 import numpy as np
 import torch
-from expert_rollouts import evaluate_random, record_demos, save_demos
+from expert_rollouts import evaluate_random, record_demos, save_demos, save_metadata
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
@@ -183,9 +182,7 @@ def main() -> None:
         "command": "python demos/make_ant_demos.py " + " ".join(sys.argv[1:]),
         "train_seconds": round(train_seconds, 1),
     }
-    json_path = out_dir / "ant.json"
-    json_path.write_text(json.dumps(meta, indent=2) + "\n")
-    print(f"saved metadata to {json_path}")
+    save_metadata(meta, out_dir / "ant.json")
 
 
 if __name__ == "__main__":

@@ -25,13 +25,12 @@ Run from the repository root::
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 from typing import Any
 
 import torch
-from expert_rollouts import evaluate_expert, evaluate_random, record_demos, save_demos
+from expert_rollouts import evaluate_expert, evaluate_random, record_demos, save_demos, save_metadata
 from stable_baselines3 import PPO
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.utils import get_linear_fn, set_random_seed
@@ -122,9 +121,7 @@ def main() -> None:
         "command": "python demos/make_cartpole_demos.py",
         "train_seconds": round(train_seconds, 1),
     }
-    json_path = out_dir / "cartpole.json"
-    json_path.write_text(json.dumps(meta, indent=2) + "\n")
-    print(f"saved metadata to {json_path}")
+    save_metadata(meta, out_dir / "cartpole.json")
 
 
 if __name__ == "__main__":

@@ -20,14 +20,13 @@ Needs the ``scenarios`` extra. Deterministic (no learning). Run from the reposit
 from __future__ import annotations
 
 import argparse
-import json
 from collections import deque
 from pathlib import Path
 from typing import Any, Dict, Optional, Tuple
 
 import gymnasium as gym
 import numpy as np
-from expert_rollouts import evaluate_random, record_demos, save_demos
+from expert_rollouts import evaluate_random, record_demos, save_demos, save_metadata
 
 from sb3_mpail.envs.maze import POINT_MAZE_ID, point_maze_figures
 
@@ -131,9 +130,7 @@ def main() -> None:
         "demo_returns": demo_returns,
         "command": "python demos/make_maze_demos.py",
     }
-    json_path = out_dir / "pointmaze.json"
-    json_path.write_text(json.dumps(meta, indent=2) + "\n")
-    print(f"saved metadata to {json_path}")
+    save_metadata(meta, out_dir / "pointmaze.json")
 
 
 if __name__ == "__main__":

@@ -23,14 +23,13 @@ Run from the repository root::
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 from typing import Any, NamedTuple, Optional
 
 import gymnasium as gym
 import numpy as np
-from expert_rollouts import evaluate_expert, evaluate_random, record_demos, save_demos
+from expert_rollouts import evaluate_expert, evaluate_random, record_demos, save_demos, save_metadata
 
 import sb3_mpail.envs  # noqa: F401  (registers the road scenarios)
 from sb3_mpail.envs.highway_roads import EGO_SCALES
@@ -132,9 +131,7 @@ def main() -> None:
         f"--eval-episodes {args.eval_episodes} --seed {args.seed}",
         "seconds": round(time.perf_counter() - start, 1),
     }
-    json_path = args.out_dir / f"{args.scenario}.json"
-    json_path.write_text(json.dumps(meta, indent=2) + "\n")
-    print(f"saved metadata to {json_path}")
+    save_metadata(meta, args.out_dir / f"{args.scenario}.json")
 
 
 if __name__ == "__main__":
