@@ -107,9 +107,8 @@ def test_parking_env_numpy_observation_equals_parking_v0s_own():
     assert episodes > 1  # the comparison went through a reset
 
 
-@pytest.mark.parametrize("speed", [2.0, 39.5], ids=["free", "at-the-speed-limit"])
-def test_parking_model_batched_rollout_matches_step_by_step(speed):
-    model = ParkingKinematics()
+def parking_rollout_inputs(speed: float):
+    """Three cars at ``speed`` m/s with random positions and headings, and 64 action sequences of 15 steps each."""
     generator = th.Generator().manual_seed(0)
     headings = th.rand(3, generator=generator, dtype=th.float64) * 2 * math.pi
     states = th.zeros(3, 12, dtype=th.float64)
@@ -119,9 +118,26 @@ def test_parking_model_batched_rollout_matches_step_by_step(speed):
     states[:, 6:] = th.tensor([0.26, 0.14, 0.0, 0.0, 0.0, 1.0], dtype=th.float64)
     # beyond [-1, 1] too: the model clips like highway-env
     actions = th.randn(15, 3, 64, 2, generator=generator, dtype=th.float64) * 1.2
+    return states, actions
+
+
+@pytest.mark.parametrize("speed", [2.0, 39.5], ids=["free", "at-the-speed-limit"])
+def test_parking_model_batched_rollout_matches_step_by_step(speed):
+    model = ParkingKinematics()
+    states, actions = parking_rollout_inputs(speed)
     with th.no_grad():
         batched = model.rollout(states, actions)
     np.testing.assert_allclose(batched, rollout_step_by_step(model, states, actions), rtol=0, atol=1e-12)
+
+
+def test_compiled_parking_rollout_is_one_graph_and_matches_step_by_step():
+    # fullgraph: compiled code never checks the speed limit on the host, so nothing breaks the graph. At 39.5 m/s the
+    # limit binds for some sequences and not for others.
+    model = ParkingKinematics()
+    states, actions = parking_rollout_inputs(39.5)
+    with th.no_grad():
+        compiled = th.compile(model.rollout, fullgraph=True, dynamic=False)(states, actions)
+    np.testing.assert_allclose(compiled, rollout_step_by_step(model, states, actions), rtol=0, atol=1e-10)
 
 
 def test_parking_trains_with_the_shipped_zoo_entry(tmp_path):

@@ -45,7 +45,7 @@ def test_racetrack_model_rollout_matches_its_steps():
         np.testing.assert_allclose(
             model.rollout(initial_states, actions), rollout_step_by_step(model, initial_states, actions), atol=1e-12
         )
-        # beyond highway-env's 40 m/s limit the closed form does not hold; the steps are taken one by one
+        # beyond highway-env's 40 m/s limit the closed form does not hold; the speeds are integrated substep by substep
         fast_states = initial_states * th.tensor([1.0, 1.0, 5.0, 5.0, 1.0, 1.0], dtype=th.float64)  # 45-50 m/s
         np.testing.assert_allclose(
             model.rollout(fast_states, actions), rollout_step_by_step(model, fast_states, actions), atol=1e-12

@@ -209,6 +209,39 @@ class ParkingKinematics(nn.Module):
         self.position_scale = position_scale
         self.velocity_scale = velocity_scale
 
+    def limit_acceleration(self, acceleration: th.Tensor, speed: th.Tensor) -> th.Tensor:
+        """
+        highway-env's speed limit: beyond ``+-max_speed`` the acceleration is capped to bring the speed back to it.
+        highway-env overwrites the held acceleration, so a limit applied in one substep carries to the next.
+        """
+        acceleration = th.where(speed > self.max_speed, th.minimum(acceleration, self.max_speed - speed), acceleration)
+        return th.where(speed < -self.max_speed, th.maximum(acceleration, -self.max_speed - speed), acceleration)
+
+    def speeds(self, initial_speed: th.Tensor, accelerations: th.Tensor) -> th.Tensor:
+        """
+        The speed at every simulation step of a roll-out. Unless the speed limit binds, ``v_k = v_0 + dt sum_{j < k}
+        a_j``, one cumulative sum; once it binds, each substep depends on the last, and the speeds are integrated one
+        substep after another over whole ``(n_envs, n_samples)`` blocks. The limit rarely binds (40 m/s in a 70 m
+        parking lot), so eager code checks for it, a host sync (free on a CPU); compiled code always takes the
+        substep loop, which has no branch to break the graph and which the compiler fuses into one kernel.
+
+        :param initial_speed: ``v_0`` per sequence, ``(n_envs, n_samples)``
+        :param accelerations: the actions' accelerations, time-major, ``(horizon, n_envs, n_samples)``
+        :return: ``v_0 .. v_{H * substeps}``, time-major, ``(horizon * substeps + 1, n_envs, n_samples)``
+        """
+        if not th.compiler.is_compiling():
+            steps = accelerations.repeat_interleave(self.substeps, dim=0).mul_(self.dt)
+            speeds = running_sum_(th.cat((initial_speed.unsqueeze(0), steps)), dim=0)
+            if not bool((speeds[:-1].abs() > self.max_speed).any()):
+                return speeds
+        speeds = accelerations.new_empty(accelerations.shape[0] * self.substeps + 1, *accelerations.shape[1:])
+        speeds[0] = initial_speed
+        for step, acceleration in enumerate(accelerations.unbind(0)):
+            for substep in range(step * self.substeps, (step + 1) * self.substeps):
+                acceleration = self.limit_acceleration(acceleration, speeds[substep])
+                th.add(speeds[substep], acceleration, alpha=self.dt, out=speeds[substep + 1])
+        return speeds
+
     def forward(self, states: th.Tensor, actions: th.Tensor) -> th.Tensor:
         actions = actions.clamp(-1.0, 1.0)
         acceleration = self.max_acceleration * actions[:, 0]
@@ -218,9 +251,7 @@ class ParkingKinematics(nn.Module):
         heading = th.atan2(states[:, 5], states[:, 4])
         speed = self.velocity_scale * (states[:, 2] * states[:, 4] + states[:, 3] * states[:, 5])
         for _ in range(self.substeps):
-            # highway-env overwrites the held acceleration, so a limit applied in one substep carries to the next
-            acceleration = th.where(speed > self.max_speed, th.minimum(acceleration, self.max_speed - speed), acceleration)
-            acceleration = th.where(speed < -self.max_speed, th.maximum(acceleration, -self.max_speed - speed), acceleration)
+            acceleration = self.limit_acceleration(acceleration, speed)
             x = x + speed * th.cos(heading + beta) * self.dt
             y = y + speed * th.sin(heading + beta) * self.dt
             heading = heading + speed * th.sin(beta) / (self.length / 2) * self.dt
@@ -237,10 +268,8 @@ class ParkingKinematics(nn.Module):
 
     def rollout(self, initial_states: th.Tensor, actions: th.Tensor) -> th.Tensor:
         """
-        All ``H`` steps at once, with cumulative sums over the ``H * substeps`` simulation steps (speed, then heading,
-        then position): the states of ``H`` calls of :meth:`forward` up to float rounding. The speed limit makes a
-        roll-out sequential once it binds, so when any sampled sequence reaches ``max_speed`` (rare: 40 m/s in a
-        70 m parking lot) the roll-out is made step by step with :meth:`forward` instead.
+        All ``H`` steps at once: the speeds of the ``H * substeps`` simulation steps (see :meth:`speeds`), then heading
+        and position as cumulative sums; the states of ``H`` calls of :meth:`forward` up to float rounding.
 
         :param initial_states: current state per env, ``(n_envs, 12)``
         :param actions: time-major sequences, ``(horizon, n_envs, n_samples, 2)``
@@ -250,23 +279,16 @@ class ParkingKinematics(nn.Module):
         horizon, n_envs, n_samples, _ = actions.shape
         states, columns = feature_major_states(initial_states, actions)
         hold_(columns, slice(6, None))  # the goal
-        # Time is the last dimension here, (n_envs, n_samples, H * substeps): torch's CPU cumsum is about 10x
-        # faster along it than along the first. Simulation step k runs the action of env step k // substeps.
-        actions = actions.clamp(-1.0, 1.0).permute(1, 2, 0, 3)
-        acceleration = (self.max_acceleration * actions[..., 0]).repeat_interleave(self.substeps, dim=-1)
-        beta = th.atan(0.5 * th.tan(self.max_steering * actions[..., 1])).repeat_interleave(self.substeps, dim=-1)
+        actions = actions.clamp(-1.0, 1.0)
         initial = initial_states[:, :, None, None]  # (n_envs, 12, 1, 1): per-env values broadcast over the samples
         start_shape = (n_envs, n_samples, 1)
         initial_speed = self.velocity_scale * (initial[:, 2] * initial[:, 4] + initial[:, 3] * initial[:, 5])
-        # v_k = v_0 + dt sum_{j < k} a_j, k = 0 .. H * substeps
-        speed = th.cat((initial_speed.expand(start_shape), acceleration * self.dt), dim=-1).cumsum(dim=-1)
-        if bool((speed[..., :-1].abs() > self.max_speed).any()):
-            for step in range(horizon):
-                flat_actions = actions[:, :, step].reshape(n_envs * n_samples, -1)
-                next_states = self(states[step].reshape(n_envs * n_samples, -1), flat_actions)
-                states[step + 1] = next_states.view(n_envs, n_samples, -1)
-            return states
-        driving_speed = speed[..., :-1]
+        speeds = self.speeds(initial_speed[..., 0].expand(n_envs, n_samples), self.max_acceleration * actions[..., 0])
+        # Time is the last dimension from here, (n_envs, n_samples, H * substeps): torch's CPU cumsum is about 10x
+        # faster along it than along the first. Simulation step k runs the action of env step k // substeps.
+        driving_speed = speeds[:-1].permute(1, 2, 0).contiguous()
+        beta = th.atan(0.5 * th.tan(self.max_steering * actions[..., 1].permute(1, 2, 0)))
+        beta = beta.repeat_interleave(self.substeps, dim=-1)
         # h_k = h_0 + sum_{j < k} v_j sin(beta_j) / (length / 2) dt
         initial_heading = th.atan2(initial[:, 5], initial[:, 4]).expand(start_shape)
         turns = driving_speed * th.sin(beta) * (self.dt / (self.length / 2))
@@ -282,7 +304,7 @@ class ParkingKinematics(nn.Module):
             return values[..., self.substeps :: self.substeps].permute(2, 0, 1)
 
         cos_heading, sin_heading = th.cos(at_env_steps(heading)), th.sin(at_env_steps(heading))
-        speed = at_env_steps(speed)
+        speed = speeds[self.substeps :: self.substeps]
         columns[0, 1:] = at_env_steps(x) / self.position_scale
         columns[1, 1:] = at_env_steps(y) / self.position_scale
         columns[2, 1:] = speed * cos_heading / self.velocity_scale

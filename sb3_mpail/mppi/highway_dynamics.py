@@ -8,7 +8,6 @@ from typing import Any
 import torch as th
 
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, DYNAMICS_MODELS, ParkingKinematics
-from sb3_mpail.mppi.reference import rollout as rollout_step_by_step
 
 RACETRACK_ID = "sb3_mpail/Racetrack-v0"
 HIGHWAY_ID = "sb3_mpail/Highway-v0"
@@ -47,18 +46,12 @@ class RacetrackKinematics(HighwayKinematics):
 
     def rollout(self, initial_states: th.Tensor, actions: th.Tensor) -> th.Tensor:
         """
-        :meth:`~sb3_mpail.mppi.dynamics.ParkingKinematics.rollout` with no acceleration. Its closed form holds while
-        the speed limit does not bind; the speed being held, that is decided by the initial speeds (a car already
-        beyond ``max_speed`` is rolled out step by step with :meth:`forward`).
+        :meth:`~sb3_mpail.mppi.dynamics.ParkingKinematics.rollout` with no acceleration.
 
         :param initial_states: current state per env, ``(n_envs, 6)``
         :param actions: time-major steering sequences, ``(horizon, n_envs, n_samples, 1)``
         :return: states ``s_0 .. s_H``, ``(horizon + 1, n_envs, n_samples, 6)``
         """
-        cos_heading, sin_heading = initial_states[:, 4], initial_states[:, 5]
-        speed = self.velocity_scale * (initial_states[:, 2] * cos_heading + initial_states[:, 3] * sin_heading)
-        if bool((speed.abs() > self.max_speed).any()):
-            return rollout_step_by_step(self, initial_states, actions)
         return super().rollout(initial_states, with_zero_acceleration(actions))
 
 
