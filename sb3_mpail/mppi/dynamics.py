@@ -223,7 +223,7 @@ class ParkingKinematics(nn.Module):
         a_j``, one cumulative sum; once it binds, each substep depends on the last, and the speeds are integrated one
         substep after another over whole ``(n_envs, n_samples)`` blocks. The limit rarely binds (40 m/s in a 70 m
         parking lot), so eager code checks for it, a host sync (free on a CPU); compiled code always takes the
-        substep loop, which has no branch to break the graph and which the compiler fuses into one kernel.
+        substep loop, which has no branch to break the graph.
 
         :param initial_speed: ``v_0`` per sequence, ``(n_envs, n_samples)``
         :param accelerations: the actions' accelerations, time-major, ``(horizon, n_envs, n_samples)``
@@ -231,7 +231,7 @@ class ParkingKinematics(nn.Module):
         """
         if not th.compiler.is_compiling():
             steps = accelerations.repeat_interleave(self.substeps, dim=0).mul_(self.dt)
-            speeds = running_sum_(th.cat((initial_speed.unsqueeze(0), steps)), dim=0)
+            speeds = th.cat((initial_speed.unsqueeze(0), steps)).cumsum(dim=0)
             if not bool((speeds[:-1].abs() > self.max_speed).any()):
                 return speeds
         speeds = accelerations.new_empty(accelerations.shape[0] * self.substeps + 1, *accelerations.shape[1:])
