@@ -213,6 +213,10 @@ class ParkingKinematics(nn.Module):
         """
         highway-env's speed limit: beyond ``+-max_speed`` the acceleration is capped to bring the speed back to it.
         highway-env overwrites the held acceleration, so a limit applied in one substep carries to the next.
+
+        :param acceleration: the acceleration held so far in this env step
+        :param speed: the signed speed at this substep, same shape
+        :return: the acceleration of this substep
         """
         acceleration = th.where(speed > self.max_speed, th.minimum(acceleration, self.max_speed - speed), acceleration)
         return th.where(speed < -self.max_speed, th.maximum(acceleration, -self.max_speed - speed), acceleration)
