@@ -229,22 +229,24 @@ class ParkingKinematics(nn.Module):
         parking lot), so eager code checks for it, a host sync (free on a CPU); compiled code always takes the
         substep loop, which has no branch to break the graph.
 
-        :param initial_speed: ``v_0`` per sequence, ``(n_envs, n_samples)``
-        :param accelerations: the actions' accelerations, time-major, ``(horizon, n_envs, n_samples)``
-        :return: ``v_0 .. v_{H * substeps}``, time-major, ``(horizon * substeps + 1, n_envs, n_samples)``
+        :param initial_speed: ``v_0`` per sequence, ``(n_envs, n_samples, 1)``
+        :param accelerations: the actions' accelerations, ``(n_envs, n_samples, horizon)``
+        :return: ``v_0 .. v_{H * substeps}``, ``(n_envs, n_samples, horizon * substeps + 1)``
         """
         if not th.compiler.is_compiling():
-            steps = accelerations.repeat_interleave(self.substeps, dim=0).mul_(self.dt)
-            speeds = th.cat((initial_speed.unsqueeze(0), steps)).cumsum(dim=0)
-            if not bool((speeds[:-1].abs() > self.max_speed).any()):
+            steps = accelerations.repeat_interleave(self.substeps, dim=-1).mul_(self.dt)
+            speeds = th.cat((initial_speed, steps), dim=-1).cumsum(dim=-1)
+            if not bool((speeds[..., :-1].abs() > self.max_speed).any()):
                 return speeds
-        speeds = accelerations.new_empty(accelerations.shape[0] * self.substeps + 1, *accelerations.shape[1:])
-        speeds[0] = initial_speed
-        for step, acceleration in enumerate(accelerations.unbind(0)):
+        # time-major, each substep written into its own contiguous block (stacking the substeps instead makes the
+        # compiler inline the whole recursion into every speed: minutes of compiling)
+        speeds = accelerations.new_empty(accelerations.shape[-1] * self.substeps + 1, *accelerations.shape[:-1])
+        speeds[0] = initial_speed[..., 0]
+        for step, acceleration in enumerate(accelerations.unbind(-1)):
             for substep in range(step * self.substeps, (step + 1) * self.substeps):
                 acceleration = self.limit_acceleration(acceleration, speeds[substep])
                 th.add(speeds[substep], acceleration, alpha=self.dt, out=speeds[substep + 1])
-        return speeds
+        return speeds.permute(1, 2, 0)
 
     def forward(self, states: th.Tensor, actions: th.Tensor) -> th.Tensor:
         actions = actions.clamp(-1.0, 1.0)
@@ -283,16 +285,15 @@ class ParkingKinematics(nn.Module):
         horizon, n_envs, n_samples, _ = actions.shape
         states, columns = feature_major_states(initial_states, actions)
         hold_(columns, slice(6, None))  # the goal
-        actions = actions.clamp(-1.0, 1.0)
+        # Time is the last dimension here, (n_envs, n_samples, H * substeps): torch's CPU cumsum is about 10x
+        # faster along it than along the first. Simulation step k runs the action of env step k // substeps.
+        actions = actions.clamp(-1.0, 1.0).permute(1, 2, 0, 3)
+        beta = th.atan(0.5 * th.tan(self.max_steering * actions[..., 1])).repeat_interleave(self.substeps, dim=-1)
         initial = initial_states[:, :, None, None]  # (n_envs, 12, 1, 1): per-env values broadcast over the samples
         start_shape = (n_envs, n_samples, 1)
         initial_speed = self.velocity_scale * (initial[:, 2] * initial[:, 4] + initial[:, 3] * initial[:, 5])
-        speeds = self.speeds(initial_speed[..., 0].expand(n_envs, n_samples), self.max_acceleration * actions[..., 0])
-        # Time is the last dimension from here, (n_envs, n_samples, H * substeps): torch's CPU cumsum is about 10x
-        # faster along it than along the first. Simulation step k runs the action of env step k // substeps.
-        driving_speed = speeds[:-1].permute(1, 2, 0).contiguous()
-        beta = th.atan(0.5 * th.tan(self.max_steering * actions[..., 1].permute(1, 2, 0)))
-        beta = beta.repeat_interleave(self.substeps, dim=-1)
+        speeds = self.speeds(initial_speed.expand(start_shape), self.max_acceleration * actions[..., 0])
+        driving_speed = speeds[..., :-1]
         # h_k = h_0 + sum_{j < k} v_j sin(beta_j) / (length / 2) dt
         initial_heading = th.atan2(initial[:, 5], initial[:, 4]).expand(start_shape)
         turns = driving_speed * th.sin(beta) * (self.dt / (self.length / 2))
@@ -308,7 +309,7 @@ class ParkingKinematics(nn.Module):
             return values[..., self.substeps :: self.substeps].permute(2, 0, 1)
 
         cos_heading, sin_heading = th.cos(at_env_steps(heading)), th.sin(at_env_steps(heading))
-        speed = speeds[self.substeps :: self.substeps]
+        speed = at_env_steps(speeds)
         columns[0, 1:] = at_env_steps(x) / self.position_scale
         columns[1, 1:] = at_env_steps(y) / self.position_scale
         columns[2, 1:] = speed * cos_heading / self.velocity_scale
