@@ -282,7 +282,7 @@ class ParkingKinematics(nn.Module):
         :return: states ``s_0 .. s_H``, ``(horizon + 1, n_envs, n_samples, 12)``, stored feature-major (see
             :func:`feature_major_states`)
         """
-        horizon, n_envs, n_samples, _ = actions.shape
+        _, n_envs, n_samples, _ = actions.shape
         states, columns = feature_major_states(initial_states, actions)
         hold_(columns, slice(6, None))  # the goal
         # Time is the last dimension here, (n_envs, n_samples, H * substeps): torch's CPU cumsum is about 10x
