@@ -209,6 +209,15 @@ class ParkingKinematics(nn.Module):
         self.position_scale = position_scale
         self.velocity_scale = velocity_scale
 
+    def signed_speed(self, states: th.Tensor) -> th.Tensor:
+        """
+        The speed decoded from observations, ``velocity_scale * (vx cos h + vy sin h)``: negative when reversing.
+
+        :param states: observations with their features along dimension 1, any trailing dimensions
+        :return: the speeds, ``states`` without dimension 1
+        """
+        return self.velocity_scale * (states[:, 2] * states[:, 4] + states[:, 3] * states[:, 5])
+
     def limit_acceleration(self, acceleration: th.Tensor, speed: th.Tensor) -> th.Tensor:
         """
         highway-env's speed limit: beyond ``+-max_speed`` the acceleration is capped to bring the speed back to it.
@@ -255,7 +264,7 @@ class ParkingKinematics(nn.Module):
         x = states[:, 0] * self.position_scale
         y = states[:, 1] * self.position_scale
         heading = th.atan2(states[:, 5], states[:, 4])
-        speed = self.velocity_scale * (states[:, 2] * states[:, 4] + states[:, 3] * states[:, 5])
+        speed = self.signed_speed(states)
         for _ in range(self.substeps):
             acceleration = self.limit_acceleration(acceleration, speed)
             x = x + speed * th.cos(heading + beta) * self.dt
@@ -291,8 +300,7 @@ class ParkingKinematics(nn.Module):
         beta = th.atan(0.5 * th.tan(self.max_steering * actions[..., 1])).repeat_interleave(self.substeps, dim=-1)
         initial = initial_states[:, :, None, None]  # (n_envs, 12, 1, 1): per-env values broadcast over the samples
         start_shape = (n_envs, n_samples, 1)
-        initial_speed = self.velocity_scale * (initial[:, 2] * initial[:, 4] + initial[:, 3] * initial[:, 5])
-        speeds = self.speeds(initial_speed.expand(start_shape), self.max_acceleration * actions[..., 0])
+        speeds = self.speeds(self.signed_speed(initial).expand(start_shape), self.max_acceleration * actions[..., 0])
         driving_speed = speeds[..., :-1]
         # h_k = h_0 + sum_{j < k} v_j sin(beta_j) / (length / 2) dt
         initial_heading = th.atan2(initial[:, 5], initial[:, 4]).expand(start_shape)
