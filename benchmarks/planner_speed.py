@@ -34,8 +34,9 @@ from benchmarks.report import machine_description, write_section
 PAPER_SETTINGS = dict(n_samples=512, horizon=10, n_iterations=5)
 TEMPERATURE = 0.1
 IMPLEMENTATIONS = {
-    "sb3-mpail": "sb3-mpail (batched, fused)",
-    "blas": "sb3-mpail, BLAS hidden layers (oneDNN off)",
+    "sb3-mpail": "sb3-mpail (batched, fused, CPU kernel)",
+    "torch": "sb3-mpail, torch path (CPU kernel off)",
+    "blas": "sb3-mpail, torch path, BLAS hidden layers (oneDNN off)",
     "compiled": "sb3-mpail + torch.compile",
     "cuda-graphs": "sb3-mpail + torch.compile(reduce-overhead) (CUDA graphs)",
     "reference": "plain reference implementation",
@@ -67,7 +68,10 @@ def random_states(n_envs: int, device: str) -> th.Tensor:
 
 def planning_step_sb3_mpail(n_envs: int, device: str, implementation: str) -> Callable[[], None]:
     compile_planner = {"compiled": True, "cuda-graphs": "reduce-overhead"}.get(implementation, False)
-    if implementation == "blas":  # each case runs in its own process: switching the fast path off here is local
+    # each case runs in its own process: switching fast paths off here is local
+    if implementation in ("torch", "blas"):
+        os.environ["SB3_MPAIL_NATIVE"] = "0"
+    if implementation == "blas":
         from sb3_mpail.mppi import fused
 
         fused.ONEDNN_LINEAR = None
@@ -204,6 +208,7 @@ def cases(args: argparse.Namespace) -> List[tuple]:
     planned = []
     for device in args.devices:
         implementations = ["sb3-mpail", "reference"] + (["pytorch_mppi"] if not args.no_pytorch_mppi else [])
+        implementations += ["torch"] if device == "cpu" else []
         implementations += ["blas"] if device == "cpu" and th.backends.mkldnn.is_available() else []
         implementations += ["compiled"] if args.compile else []
         implementations += ["cuda-graphs"] if device == "cuda" else []

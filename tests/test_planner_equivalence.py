@@ -77,17 +77,23 @@ def test_bicycle_plans_match_the_reference(n_envs):
     assert th.all(optimised[-1][1] > 0.01)  # the weights are not degenerate: the comparison is not vacuous
 
 
-def use_onednn(monkeypatch: pytest.MonkeyPatch, onednn: bool) -> None:
-    """oneDNN's fused linear on every hidden layer, or on none (the BLAS path of GPUs and builds without oneDNN)."""
-    if onednn:
+def use_cpu_path(monkeypatch: pytest.MonkeyPatch, path: str) -> None:
+    """
+    The compiled kernel where it builds ("kernel"), or the torch path with oneDNN's fused linear on every hidden
+    layer ("onednn") or on none ("blas", the path of GPUs and builds without oneDNN).
+    """
+    if path == "kernel":
+        return
+    monkeypatch.setattr(fused, "native_mlp", lambda mlp: None)
+    if path == "onednn":
         monkeypatch.setattr(fused, "ONEDNN_MIN_ROWS_PER_THREAD", 1)
     else:
         monkeypatch.setattr(fused, "ONEDNN_LINEAR", None)
 
 
-@pytest.mark.parametrize("onednn", [True, False])
-def test_float32_plans_at_the_paper_settings_match_the_reference(monkeypatch, onednn):
-    use_onednn(monkeypatch, onednn)
+@pytest.mark.parametrize("cpu_path", ["kernel", "onednn", "blas"])
+def test_float32_plans_at_the_paper_settings_match_the_reference(monkeypatch, cpu_path):
+    use_cpu_path(monkeypatch, cpu_path)
     policy = make_policy(NAVIGATION, "bicycle", dtype=th.float32)  # N = 512, H = 10, J = 5
     policy.temperature.fill_(1.0)
     assert_same_plans(*plan_both_ways(policy, navigation_states(4, dtype=th.float32)), atol=1e-5)
@@ -131,9 +137,9 @@ def test_torch_builds_with_onednn_give_the_fused_linear():
 
 
 @pytest.mark.parametrize("activation", [th.nn.ReLU(), th.nn.LeakyReLU(0.2), th.nn.Tanh()])
-@pytest.mark.parametrize("onednn", [True, False])
-def test_frozen_hidden_layers_match_the_module(monkeypatch, activation, onednn):
-    use_onednn(monkeypatch, onednn)
+@pytest.mark.parametrize("cpu_path", ["kernel", "onednn", "blas"])
+def test_frozen_hidden_layers_match_the_module(monkeypatch, activation, cpu_path):
+    use_cpu_path(monkeypatch, cpu_path)
     th.manual_seed(0)
     network = th.nn.Sequential(th.nn.Linear(5, 16), activation, th.nn.Linear(16, 8), activation, th.nn.Linear(8, 1)).eval()
     inputs = th.randn(300, 5)

@@ -15,6 +15,9 @@ intermediate afresh. Here instead:
 * the rows are processed in chunks that stay in the CPU cache;
 * the markups ``eta^t`` and the output layer fold into one matrix-vector product per chunk.
 
+On CPU float32 tensors, all of that is one compiled kernel where the machine can build it
+(:mod:`sb3_mpail.mppi.native`): every layer for a block of rows in the L1 cache, summed over the horizon.
+
 Results equal the module path up to float rounding; ``tests/test_planner_equivalence.py`` checks it.
 """
 
@@ -25,6 +28,8 @@ from typing import Callable, Dict, List, Optional, Tuple
 import torch as th
 import torch.nn.functional as F
 from torch import nn
+
+from sb3_mpail.mppi.native import NativeMlp
 
 #: rows per chunk of the hidden activations and thread: 8192 x 32 floats (1 MiB) stay in a core's cache between layers
 CHUNK_ROWS_PER_THREAD = 8192
@@ -158,6 +163,14 @@ def freeze_mlp(network: nn.Module) -> Optional[FrozenMlp]:
     return FrozenMlp(weights, biases, activations)
 
 
+def native_mlp(mlp: FrozenMlp) -> Optional[NativeMlp]:
+    """The compiled kernel's view of a frozen MLP, or ``None`` where the kernel is unavailable or cannot take it."""
+    activations = mlp.activations
+    names = [None if activation is None else activation.onednn_name for activation in activations]
+    slopes = [activation.onednn_scalars[0] if activation and activation.onednn_scalars else 0.0 for activation in activations]
+    return NativeMlp.from_layers(mlp.weights, mlp.biases, names, slopes)
+
+
 def _hidden_layers(
     mlp: FrozenMlp, hidden: th.Tensor, first_layer: int, last_layer: int, workspace: Workspace
 ) -> th.Tensor:
@@ -204,6 +217,7 @@ class FusedTransitionCost:
         self.state_weight = first_weight[:state_dim]
         self.next_state_weight = first_weight[state_dim:]
         self.output_weight = mlp.weights[-1][:, 0]
+        self.native = native_mlp(mlp)
         self._markups: Optional[th.Tensor] = None
         self._negative_markups = self._constant = first_weight.new_zeros(())
 
@@ -226,6 +240,10 @@ class FusedTransitionCost:
             self._markups = markups
             self._negative_markups = -markups
             self._constant = self.mlp.biases[-1] * self._negative_markups.sum()
+        if self.native is not None:
+            return self.native.marked_up_sums(flat_states, self._negative_markups, True, costs).add_(self._constant).view(
+                n_envs, n_samples
+            )
         costs.copy_(self._constant.expand(columns))
         # Chunks of at most chunk_rows() transitions: several whole time steps when one step has few columns, else
         # column blocks of one time step. Either way a chunk's (time, column) rows merge into one stride, so the
@@ -274,6 +292,8 @@ class FusedValue:
 
     def __init__(self, mlp: FrozenMlp):
         self.mlp = mlp
+        self.native = native_mlp(mlp)
+        self._unit_markup = mlp.weights[0].new_ones(1)
 
     def __call__(self, states: th.Tensor, workspace: Workspace) -> th.Tensor:
         """
@@ -285,6 +305,9 @@ class FusedValue:
         rows = flat_states.shape[0]
         values = workspace.get("values", (rows,), states)
         mlp = self.mlp
+        if self.native is not None:
+            values = self.native.marked_up_sums(flat_states.unsqueeze(0), self._unit_markup, False, values)
+            return values.add_(mlp.biases[-1]).view(states.shape[:-1])
         rows_per_chunk = chunk_rows()
         for start in range(0, rows, rows_per_chunk):
             stop = min(start + rows_per_chunk, rows)

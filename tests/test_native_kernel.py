@@ -1,0 +1,133 @@
+"""The planner's compiled CPU kernel (sb3_mpail/mppi/native.py): same costs as the torch path, built safely or not at all."""
+
+import warnings
+from pathlib import Path
+
+import pytest
+import torch as th
+from torch import nn
+
+import sb3_mpail.mppi.fused as fused
+import sb3_mpail.mppi.native as native
+
+# only a machine without a C compiler skips: where there is one (CI), a kernel that fails to build fails these tests
+pytestmark = pytest.mark.skipif(native._compiler() is None, reason="no C compiler here")
+
+
+def frozen_network(layers: list) -> fused.FrozenMlp:
+    th.manual_seed(0)
+    return fused.freeze_mlp(nn.Sequential(*layers).eval())
+
+
+def transition_costs(mlp: fused.FrozenMlp, states: th.Tensor, use_kernel: bool) -> th.Tensor:
+    cost = fused.FusedTransitionCost(mlp, states.shape[-1])
+    if use_kernel:
+        assert cost.native is not None
+    else:
+        cost.native = None
+    markups = 1.01 ** th.arange(states.shape[0] - 1, dtype=states.dtype)
+    with th.no_grad():
+        return cost(states, markups, fused.Workspace()).clone()
+
+
+def rolled_out_states(horizon: int, n_envs: int, n_samples: int, state_dim: int, feature_major: bool) -> th.Tensor:
+    generator = th.Generator().manual_seed(1)
+    if feature_major:  # as the bicycle's roll-out stores them (see dynamics.feature_major_states)
+        columns = th.randn(state_dim, horizon + 1, n_envs, n_samples, generator=generator)
+        return columns.permute(1, 2, 3, 0)
+    return th.randn(horizon + 1, n_envs, n_samples, state_dim, generator=generator)
+
+
+@pytest.mark.parametrize("activation", [nn.ReLU(), nn.LeakyReLU(0.2), nn.Tanh()])
+@pytest.mark.parametrize("feature_major", [True, False])
+def test_kernel_transition_costs_match_the_torch_path(activation, feature_major):
+    # widths that are not multiples of the kernel's groups of 4 outputs, and 3 x 67 columns: a partial last block
+    mlp = frozen_network([nn.Linear(14, 17), activation, nn.Linear(17, 6), activation, nn.Linear(6, 1)])
+    states = rolled_out_states(horizon=4, n_envs=3, n_samples=67, state_dim=7, feature_major=feature_major)
+    kernel, torch_path = transition_costs(mlp, states, True), transition_costs(mlp, states, False)
+    assert kernel.shape == (3, 67)
+    assert th.allclose(kernel, torch_path, atol=1e-5, rtol=1e-5), (kernel - torch_path).abs().max()
+
+
+def test_kernel_values_match_the_module():
+    network = nn.Sequential(nn.Linear(12, 32), nn.LeakyReLU(), nn.Linear(32, 32), nn.LeakyReLU(), nn.Linear(32, 1)).eval()
+    value = fused.FusedValue(fused.freeze_mlp(network))
+    assert value.native is not None
+    states = th.randn(5, 700, 12)
+    with th.no_grad():
+        assert th.allclose(value(states, fused.Workspace()), network(states)[..., 0], atol=1e-5, rtol=1e-5)
+
+
+def test_kernel_costs_do_not_depend_on_the_thread_count():
+    # 8 x 512 columns: enough for the kernel to split them between threads
+    mlp = frozen_network([nn.Linear(24, 32), nn.LeakyReLU(), nn.Linear(32, 32), nn.LeakyReLU(), nn.Linear(32, 1)])
+    states = rolled_out_states(horizon=10, n_envs=8, n_samples=512, state_dim=12, feature_major=True)
+    threads = th.get_num_threads()
+    try:
+        th.set_num_threads(1)
+        one_thread = transition_costs(mlp, states, True)
+        th.set_num_threads(2)
+        two_threads = transition_costs(mlp, states, True)
+    finally:
+        th.set_num_threads(threads)
+    assert th.equal(one_thread, two_threads)
+
+
+@pytest.mark.parametrize(
+    "layers",
+    [
+        [nn.Linear(24, 300), nn.ReLU(), nn.Linear(300, 1)],  # wider than the kernel's scratch arrays
+        [nn.Linear(24, 8), nn.ELU(), nn.Linear(8, 1)],  # an activation the kernel does not know (nor the fused path)
+    ],
+)
+def test_networks_the_kernel_cannot_take_keep_the_torch_path(layers):
+    mlp = fused.freeze_mlp(nn.Sequential(*layers).eval())
+    assert mlp is None or fused.native_mlp(mlp) is None
+
+
+def test_float64_networks_keep_the_torch_path():
+    network = nn.Sequential(nn.Linear(8, 16), nn.ReLU(), nn.Linear(16, 1)).double().eval()
+    assert fused.native_mlp(fused.freeze_mlp(network)) is None
+
+
+@pytest.fixture
+def fresh_build(monkeypatch, tmp_path):
+    """An empty kernel cache, and ``load_library`` forgetting the library it loaded."""
+    monkeypatch.setenv("SB3_MPAIL_CACHE", str(tmp_path))
+    native.load_library.cache_clear()
+    yield tmp_path
+    native.load_library.cache_clear()
+
+
+def test_the_library_is_built_once_and_then_taken_from_the_cache(fresh_build, monkeypatch):
+    library = native._build(native._compiler())
+    assert library.parent == fresh_build and list(fresh_build.iterdir()) == [library]
+
+    def no_compiler(*args, **kwargs):
+        raise AssertionError("compiled again")
+
+    monkeypatch.setattr(native.subprocess, "run", no_compiler)
+    assert native._build(native._compiler()) == library
+
+
+def test_a_failed_build_warns_leaves_no_file_and_keeps_the_torch_path(fresh_build, monkeypatch):
+    monkeypatch.setattr(native, "COMPILER_FLAGS", native.COMPILER_FLAGS + ("-fno-such-flag",))
+    with pytest.warns(UserWarning, match="kernel is unavailable.*-fno-such-flag"):
+        assert native.load_library() is None
+    assert list(Path(fresh_build).iterdir()) == []  # no partial library for a later process to load
+    mlp = frozen_network([nn.Linear(8, 16), nn.ReLU(), nn.Linear(16, 1)])
+    assert fused.FusedTransitionCost(mlp, 4).native is None
+
+
+def test_without_a_compiler_the_planner_warns_and_keeps_the_torch_path(fresh_build, monkeypatch):
+    monkeypatch.setattr(native, "_compiler", lambda: None)
+    with pytest.warns(UserWarning, match="no C compiler"):
+        assert native.load_library() is None
+
+
+def test_the_kernel_can_be_switched_off(fresh_build, monkeypatch):
+    monkeypatch.setenv("SB3_MPAIL_NATIVE", "0")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert native.load_library() is None
+    assert list(Path(fresh_build).iterdir()) == []
