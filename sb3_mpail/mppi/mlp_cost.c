@@ -24,7 +24,7 @@
 #define BLOCK (LANES * VECTORS)
 #define GROUP 4 /* output units per pass over the inputs: GROUP * VECTORS independent accumulators */
 #define MAX_WIDTH 256
-#define MIN_COLUMNS_PER_THREAD 1024 /* below this, another thread costs more than it saves */
+#define MIN_COLUMNS_PER_THREAD 256 /* below this, another thread costs more than it saves */
 
 typedef float vector __attribute__((vector_size(LANES * sizeof(float))));
 

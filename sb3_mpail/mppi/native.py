@@ -3,9 +3,8 @@ The planner's CPU kernel: a small MLP's cost over many rows in one pass (``mlp_c
 
 The torch path of :mod:`sb3_mpail.mppi.fused` runs each layer as a matrix product over a chunk of rows and then adds
 the bias and activation in passes of their own, so every layer's output goes to memory and back. The kernel instead
-runs every layer for a block of rows while it is in the L1 cache and sums the marked-up outputs over the horizon; on
-a 2-core Xeon it takes about half the time of the torch path for the navigation discriminator (``BENCHMARKS.md``,
-"planner_speed").
+runs every layer for a block of rows while it is in the L1 cache and sums the marked-up outputs over the horizon
+(``BENCHMARKS.md``, "planner_speed", times the planner with and without it).
 
 It is compiled at first use with the machine's C compiler (``$CC``, else ``cc``, ``gcc`` or ``clang``) for the
 machine's own instruction set and linked to the GNU OpenMP runtime torch has loaded, so its threads are torch's
