@@ -73,6 +73,23 @@ def test_kernel_costs_do_not_depend_on_the_thread_count():
     assert th.equal(one_thread, two_threads)
 
 
+def test_the_kernel_refuses_tensors_it_would_read_or_write_out_of_bounds():
+    mlp = fused.native_mlp(frozen_network([nn.Linear(8, 16), nn.ReLU(), nn.Linear(16, 1)]))
+    states, markups, out = th.randn(3, 10, 4), th.ones(2), th.empty(10)
+    assert mlp.marked_up_sums(states, markups, True, out) is out
+    bad_calls = {
+        "out too short": (states, markups, True, th.empty(9)),
+        "out strided": (states, markups, True, th.empty(20)[::2]),
+        "markups for another horizon": (states, th.ones(3), True, out),
+        "states of another size": (th.randn(3, 10, 5), markups, True, out),
+        "float64 states": (states.double(), markups, True, out),
+    }
+    for name, arguments in bad_calls.items():
+        with pytest.raises(ValueError):
+            mlp.marked_up_sums(*arguments)
+            pytest.fail(name)
+
+
 @pytest.mark.parametrize(
     "layers",
     [

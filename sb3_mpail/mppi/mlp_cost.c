@@ -124,23 +124,26 @@ static void column_range(const float *states, long feature_stride, long time_str
  * layer's bias left out) on the input x(t, c) = [s(t, c), s(t + 1, c)] when pairs, else s(t, c), and feature f of
  * s(t, c) is states[f * feature_stride + t * time_stride + c * column_stride].
  * Layer l maps widths[l] inputs to widths[l + 1] outputs (widths[n_layers] == 1), every width <= MAX_WIDTH.
- * The columns are split into one contiguous range of whole blocks per OpenMP thread.
+ * The columns are split into one contiguous range of whole blocks per thread, at most max_threads (torch's count).
  */
 void mlp_costs(const float *states, long feature_stride, long time_stride, long column_stride, int state_dim,
                int pairs, int steps, long columns, int n_layers, const int *widths, const float *const *weights,
                const float *const *biases, const int *activations, const float *slopes, const float *markups,
-               float *out) {
+               float *out, int max_threads) {
+    long threads = columns / MIN_COLUMNS_PER_THREAD;
+    if (threads > max_threads) threads = max_threads;
+    if (threads <= 1) {
+        column_range(states, feature_stride, time_stride, column_stride, state_dim, pairs, steps, 0, columns, n_layers,
+                     widths, weights, biases, activations, slopes, markups, out);
+        return;
+    }
     long n_blocks = (columns + BLOCK - 1) / BLOCK;
-#pragma omp parallel if (columns >= 2 * MIN_COLUMNS_PER_THREAD)
+#pragma omp parallel num_threads(threads)
     {
-        long threads = omp_get_num_threads(), thread = omp_get_thread_num();
-        if (threads > columns / MIN_COLUMNS_PER_THREAD) threads = columns / MIN_COLUMNS_PER_THREAD;
-        if (threads < 1) threads = 1;
-        if (thread < threads) {
-            long begin = n_blocks * thread / threads * BLOCK, end = n_blocks * (thread + 1) / threads * BLOCK;
-            if (end > columns) end = columns;
-            column_range(states, feature_stride, time_stride, column_stride, state_dim, pairs, steps, begin, end,
-                         n_layers, widths, weights, biases, activations, slopes, markups, out + begin);
-        }
+        long count = omp_get_num_threads(), thread = omp_get_thread_num();
+        long begin = n_blocks * thread / count * BLOCK, end = n_blocks * (thread + 1) / count * BLOCK;
+        if (end > columns) end = columns;
+        column_range(states, feature_stride, time_stride, column_stride, state_dim, pairs, steps, begin, end, n_layers,
+                     widths, weights, biases, activations, slopes, markups, out + begin);
     }
 }

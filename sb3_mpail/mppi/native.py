@@ -8,7 +8,7 @@ runs every layer for a block of rows while it is in the L1 cache and sums the ma
 
 It is compiled at first use with the machine's C compiler (``$CC``, else ``cc``, ``gcc`` or ``clang``) for the
 machine's own instruction set and linked to the GNU OpenMP runtime torch has loaded, so its threads are torch's
-(``torch.set_num_threads`` applies). The library is cached under ``$SB3_MPAIL_CACHE`` (default
+(as many as ``torch.get_num_threads()``). The library is cached under ``$SB3_MPAIL_CACHE`` (default
 ``~/.cache/sb3_mpail``), one file per source, compiler, OpenMP runtime and CPU. Without a compiler or that runtime
 (torch builds for macOS use another), or with ``SB3_MPAIL_NATIVE=0``, the planner keeps the torch path (a warning
 says why, once); the two agree to float rounding.
@@ -122,6 +122,7 @@ def load_library() -> Optional[ctypes.CDLL]:
     library.mlp_costs.restype = None
     integer, long = ctypes.c_int, ctypes.c_long
     library.mlp_costs.argtypes = [pointer, long, long, long, integer, integer, integer, long, integer] + [pointer] * 7
+    library.mlp_costs.argtypes += [integer]
     return library
 
 
@@ -201,13 +202,18 @@ class NativeMlp:
         """
         n_states, columns, state_dim = states.shape
         steps = n_states - 1 if pairs else n_states
+        # the kernel reads and writes raw memory: anything else than these shapes and types would go out of bounds
         if (2 if pairs else 1) * state_dim != self.input_size:
             raise ValueError(f"the MLP takes {self.input_size} inputs, not {'2 x ' if pairs else ''}{state_dim}")
+        if markups.shape != (steps,) or out.shape != (columns,) or not out.is_contiguous():
+            raise ValueError(f"expected {steps} markups and a contiguous output of {columns} columns")
+        if any(tensor.dtype != th.float32 or tensor.device.type != "cpu" for tensor in (states, markups, out)):
+            raise ValueError("the CPU kernel takes CPU float32 tensors only")
         markups = markups.contiguous()
         time_stride, column_stride, feature_stride = states.stride()
         self.library.mlp_costs(
             states.data_ptr(), feature_stride, time_stride, column_stride, state_dim, int(pairs), steps, columns,
             self.n_layers, self._widths, self._weights, self._biases, self._activations, self._slopes,
-            markups.data_ptr(), out.data_ptr(),
+            markups.data_ptr(), out.data_ptr(), th.get_num_threads(),
         )  # fmt: skip
         return out
