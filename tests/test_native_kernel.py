@@ -1,5 +1,6 @@
 """The planner's compiled CPU kernel (sb3_mpail/mppi/native.py): same costs as the torch path, built safely or not at all."""
 
+import platform
 import warnings
 from pathlib import Path
 
@@ -71,6 +72,17 @@ def test_kernel_costs_do_not_depend_on_the_thread_count():
     finally:
         th.set_num_threads(threads)
     assert th.equal(one_thread, two_threads)
+
+
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86 instruction sets")
+def test_the_kernel_built_without_avx512_gives_the_same_costs(fresh_build, monkeypatch):
+    # 8-float vectors instead of 16, as on CPUs without AVX-512 (most AMD ones before Zen 4)
+    flags = tuple(flag for flag in native.COMPILER_FLAGS if flag != "-march=native") + ("-mavx2", "-mfma")
+    monkeypatch.setattr(native, "COMPILER_FLAGS", flags)
+    mlp = frozen_network([nn.Linear(14, 17), nn.LeakyReLU(0.2), nn.Linear(17, 6), nn.Tanh(), nn.Linear(6, 1)])
+    states = rolled_out_states(horizon=4, n_envs=3, n_samples=67, state_dim=7, feature_major=True)
+    kernel, torch_path = transition_costs(mlp, states, True), transition_costs(mlp, states, False)
+    assert th.allclose(kernel, torch_path, atol=1e-5, rtol=1e-5), (kernel - torch_path).abs().max()
 
 
 def test_the_kernel_refuses_tensors_it_would_read_or_write_out_of_bounds():
