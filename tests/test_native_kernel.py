@@ -42,7 +42,7 @@ def rolled_out_states(horizon: int, n_envs: int, n_samples: int, state_dim: int,
 @pytest.mark.parametrize("activation", [nn.ReLU(), nn.LeakyReLU(0.2), nn.Tanh()])
 @pytest.mark.parametrize("feature_major", [True, False])
 def test_kernel_transition_costs_match_the_torch_path(activation, feature_major):
-    # widths that are not multiples of the kernel's groups of 4 outputs, and 3 x 67 columns: a partial last block
+    # widths that are not multiples of the kernel's groups of 4 or 8 outputs, and 3 x 67 columns: a partial last block
     mlp = frozen_network([nn.Linear(14, 17), activation, nn.Linear(17, 6), activation, nn.Linear(6, 1)])
     states = rolled_out_states(horizon=4, n_envs=3, n_samples=67, state_dim=7, feature_major=feature_major)
     kernel, torch_path = transition_costs(mlp, states, True), transition_costs(mlp, states, False)
