@@ -7,6 +7,9 @@ import torch as th
 from gymnasium import spaces
 
 from sb3_mpail.mppi import KinematicBicycle, LearnedDynamics, PendulumDynamics, TransitionReplayBuffer, make_dynamics
+from sb3_mpail.mppi.dynamics import ParkingKinematics, PointMassDynamics
+from sb3_mpail.mppi.highway_dynamics import HighwayKinematics
+from sb3_mpail.mppi.planner import rollout
 
 
 def test_pendulum_model_predicts_gymnasium_pendulum_exactly():
@@ -79,3 +82,21 @@ def test_dynamics_returning_the_wrong_shape_is_rejected():
 def test_plain_callable_is_used_as_dynamics():
     model = make_dynamics(lambda s, a: s + a, spaces.Box(-1, 1, (2,)), spaces.Box(-1, 1, (2,)))
     assert th.equal(model(th.ones(1, 2), th.ones(1, 2)), th.full((1, 2), 2.0))
+
+
+@pytest.mark.parametrize(
+    "model, state_dim, action_dim",
+    [(KinematicBicycle(), 12, 2), (ParkingKinematics(), 12, 2), (PointMassDynamics(), 6, 2), (HighwayKinematics(), 6, 2)],
+)
+def test_models_keep_the_state_dims_they_declare_held(model, state_dim, action_dim):
+    # the planner's kernel costs these dimensions at their initial values: they must not move, bit for bit
+    generator = th.Generator().manual_seed(0)
+    initial_states = th.randn(3, state_dim, generator=generator)
+    actions = th.rand(10, 3, 8, action_dim, generator=generator) * 2.4 - 1.2  # some beyond the bounds
+    with th.no_grad():
+        states = rollout(model, initial_states, actions)
+    held = list(model.held_state_dims)
+    assert all(0 <= dim < state_dim for dim in held)
+    assert th.equal(states[..., held], initial_states[:, None, held].expand_as(states[..., held]))
+    moving = [dim for dim in range(state_dim) if dim not in held]
+    assert not th.equal(states[..., moving], initial_states[:, None, moving].expand_as(states[..., moving]))

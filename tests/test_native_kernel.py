@@ -50,6 +50,42 @@ def test_kernel_transition_costs_match_the_torch_path(activation, feature_major)
     assert th.allclose(kernel, torch_path, atol=1e-5, rtol=1e-5), (kernel - torch_path).abs().max()
 
 
+def held_rolled_out_states(held_dims: list, n_envs: int = 3, n_samples: int = 67) -> tuple:
+    """Feature-major roll-outs whose ``held_dims`` stay at each env's initial values, and those initial states."""
+    states = rolled_out_states(horizon=4, n_envs=n_envs, n_samples=n_samples, state_dim=7, feature_major=True)
+    initial_states = th.randn(n_envs, 7, generator=th.Generator().manual_seed(2))
+    states[..., held_dims] = initial_states[:, None, held_dims]
+    return states, initial_states
+
+
+@pytest.mark.parametrize("held_dims", [[1, 4, 5], list(range(7))])
+@pytest.mark.parametrize("hidden_layers", [0, 2])
+def test_kernel_costs_with_held_state_dims_match_the_torch_path(held_dims, hidden_layers):
+    # 67 samples per env: blocks of 16 or 32 columns straddle two envs, whose held values differ
+    widths = [14, 17, 6][: hidden_layers + 1]
+    layers = []
+    for n_in, n_out in zip(widths, widths[1:]):
+        layers += [nn.Linear(n_in, n_out), nn.LeakyReLU(0.2)]
+    mlp = frozen_network(layers + [nn.Linear(widths[-1], 1)])
+    states, initial_states = held_rolled_out_states(held_dims)
+    markups = 1.01 ** th.arange(4, dtype=th.float32)
+    cost = fused.FusedTransitionCost(mlp, 7)
+    cost.hold(held_dims, initial_states)
+    with th.no_grad():
+        kernel = cost(states, markups, fused.Workspace()).clone()
+    torch_path = transition_costs(mlp, states, False)
+    assert th.allclose(kernel, torch_path, atol=1e-5, rtol=1e-5), (kernel - torch_path).abs().max()
+
+
+def test_kernel_values_with_held_state_dims_match_the_module():
+    network = nn.Sequential(nn.Linear(7, 32), nn.ReLU(), nn.Linear(32, 1)).eval()
+    value = fused.FusedValue(fused.freeze_mlp(network))
+    states, initial_states = held_rolled_out_states([0, 3])
+    value.hold([0, 3], initial_states)
+    with th.no_grad():
+        assert th.allclose(value(states[-1], fused.Workspace()), network(states[-1])[..., 0], atol=1e-5, rtol=1e-5)
+
+
 def test_kernel_values_match_the_module():
     network = nn.Sequential(nn.Linear(12, 32), nn.LeakyReLU(), nn.Linear(32, 32), nn.LeakyReLU(), nn.Linear(32, 1)).eval()
     value = fused.FusedValue(fused.freeze_mlp(network))
@@ -80,9 +116,14 @@ def test_the_kernel_built_without_avx512_gives_the_same_costs(fresh_build, monke
     flags = tuple(flag for flag in native.COMPILER_FLAGS if flag != "-march=native") + ("-mavx2", "-mfma")
     monkeypatch.setattr(native, "COMPILER_FLAGS", flags)
     mlp = frozen_network([nn.Linear(14, 17), nn.LeakyReLU(0.2), nn.Linear(17, 6), nn.Tanh(), nn.Linear(6, 1)])
-    states = rolled_out_states(horizon=4, n_envs=3, n_samples=67, state_dim=7, feature_major=True)
+    states, initial_states = held_rolled_out_states([1, 4, 5])
     kernel, torch_path = transition_costs(mlp, states, True), transition_costs(mlp, states, False)
     assert th.allclose(kernel, torch_path, atol=1e-5, rtol=1e-5), (kernel - torch_path).abs().max()
+    cost = fused.FusedTransitionCost(mlp, 7)
+    cost.hold([1, 4, 5], initial_states)
+    with th.no_grad():
+        held = cost(states, 1.01 ** th.arange(4, dtype=th.float32), fused.Workspace())
+    assert th.allclose(held, torch_path, atol=1e-5, rtol=1e-5), (held - torch_path).abs().max()
 
 
 def test_the_kernel_refuses_tensors_it_would_read_or_write_out_of_bounds():
@@ -100,6 +141,19 @@ def test_the_kernel_refuses_tensors_it_would_read_or_write_out_of_bounds():
         with pytest.raises(ValueError):
             mlp.marked_up_sums(*arguments)
             pytest.fail(name)
+    held = mlp.hold([1], th.randn(5, 4), pairs=True)
+    assert mlp.marked_up_sums(states, markups, True, out, held) is out
+    other_mlp = fused.native_mlp(frozen_network([nn.Linear(8, 4), nn.ReLU(), nn.Linear(4, 1)]))
+    bad_holds = {
+        "columns that do not split into the envs": (th.randn(3, 12, 4), markups, True, th.empty(12), held),
+        "held inputs of another MLP": (states, markups, True, out, other_mlp.hold([1], th.randn(5, 4), pairs=True)),
+    }
+    for name, arguments in bad_holds.items():
+        with pytest.raises(ValueError):
+            mlp.marked_up_sums(*arguments)
+            pytest.fail(name)
+    with pytest.raises(ValueError, match="out of range"):
+        mlp.hold([4], th.randn(5, 4), pairs=True)
 
 
 @pytest.mark.parametrize(

@@ -150,18 +150,31 @@ def test_weights_are_softmax_of_negative_cost_and_std_is_their_spread():
     assert std.item() == pytest.approx(float(th.sqrt((weights * (actions.view(3) - plan.view(1)).square()).sum())))
 
 
-@pytest.mark.parametrize("uniform", [True, False])
-def test_samples_follow_each_action_dimensions_own_std_and_bounds(uniform):
+def sampler_and_plan(uniform: bool) -> tuple:
     low = np.array([-1.0, -1.0] if uniform else [-1.0, -4.0], np.float32)
     high = np.array([1.0, 1.0] if uniform else [1.0, 0.5], np.float32)
     sampler = GaussianSampler(low, high, 0.1 if uniform else np.array([0.1, 0.05], np.float32))
     plan = th.tensor([[[0.0, -2.0]], [[0.9, 0.4]]]).expand(2, 3, 2).contiguous()
-    actions = sampler(plan, 4000, th.Generator().manual_seed(0))
-    # the same draw through per-dimension tensors, the path taken when dimensions differ
+    return sampler, plan
+
+
+@pytest.mark.parametrize("uniform", [True, False])
+@pytest.mark.parametrize("n_samples", [4000, 30, 7])
+def test_samples_are_the_plan_plus_scaled_noise_clamped_to_the_bounds(uniform, n_samples):
+    # the sampler adds the plan over rows of several samples (as many as divide n_samples): the same numbers as a
+    # plain broadcast over single samples
+    sampler, plan = sampler_and_plan(uniform)
+    actions = sampler(plan, n_samples, th.Generator().manual_seed(0))
     expected = th.randn(actions.shape, generator=th.Generator().manual_seed(0))
     expected = expected * sampler.noise_std + plan.transpose(0, 1).unsqueeze(2)
     expected = th.clamp(expected, sampler.action_low, sampler.action_high)
     assert th.equal(actions, expected)
-    assert (actions >= th.as_tensor(low)).all() and (actions <= th.as_tensor(high)).all()
+
+
+@pytest.mark.parametrize("uniform", [True, False])
+def test_samples_follow_each_action_dimensions_own_std_and_bounds(uniform):
+    sampler, plan = sampler_and_plan(uniform)
+    actions = sampler(plan, 4000, th.Generator().manual_seed(0))
+    assert (actions >= sampler.action_low).all() and (actions <= sampler.action_high).all()
     unclamped_std = actions[:, 0].reshape(-1, 2).std(dim=0)  # env 0, dimension 0 is far from its bounds
     assert unclamped_std[0] == pytest.approx(float(sampler.noise_std[0]), rel=0.05)

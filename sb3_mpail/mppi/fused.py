@@ -16,20 +16,22 @@ intermediate afresh. Here instead:
 * the markups ``eta^t`` and the output layer fold into one matrix-vector product per chunk.
 
 On CPU float32 tensors, all of that is one compiled kernel where the machine can build it
-(:mod:`sb3_mpail.mppi.native`): every layer for a block of rows in the L1 cache, summed over the horizon.
+(:mod:`sb3_mpail.mppi.native`): every layer for a block of rows in the L1 cache, summed over the horizon. Told which
+state dimensions the roll-out holds at their initial values (:meth:`FusedTransitionCost.hold`), the kernel leaves
+them out of the first layer's products and adds their terms as a bias per env.
 
 Results equal the module path up to float rounding; ``tests/test_planner_equivalence.py`` checks it.
 """
 
 from dataclasses import dataclass
 from functools import partial
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import torch as th
 import torch.nn.functional as F
 from torch import nn
 
-from sb3_mpail.mppi.native import NativeMlp
+from sb3_mpail.mppi.native import HeldInputs, NativeMlp
 
 #: rows per chunk of the hidden activations and thread: 8192 x 32 floats (1 MiB) stay in a core's cache between layers
 CHUNK_ROWS_PER_THREAD = 8192
@@ -38,6 +40,7 @@ CHUNK_ROWS_PER_THREAD = 8192
 def chunk_rows() -> int:
     """Rows per chunk: each of torch's threads takes about ``CHUNK_ROWS_PER_THREAD`` of a chunk's matrix products."""
     return CHUNK_ROWS_PER_THREAD * th.get_num_threads()
+
 
 InPlaceActivation = Callable[[th.Tensor], th.Tensor]
 
@@ -171,9 +174,7 @@ def native_mlp(mlp: FrozenMlp) -> Optional[NativeMlp]:
     return NativeMlp.from_layers(mlp.weights, mlp.biases, names, slopes)
 
 
-def _hidden_layers(
-    mlp: FrozenMlp, hidden: th.Tensor, first_layer: int, last_layer: int, workspace: Workspace
-) -> th.Tensor:
+def _hidden_layers(mlp: FrozenMlp, hidden: th.Tensor, first_layer: int, last_layer: int, workspace: Workspace) -> th.Tensor:
     """
     Layers ``first_layer .. last_layer - 1`` of ``mlp`` on 2-D ``hidden``: one oneDNN call per layer with bias and
     activation fused on contiguous CPU float32 rows, ``ONEDNN_MIN_ROWS_PER_THREAD`` or more per thread (each call
@@ -218,8 +219,17 @@ class FusedTransitionCost:
         self.next_state_weight = first_weight[state_dim:]
         self.output_weight = mlp.weights[-1][:, 0]
         self.native = native_mlp(mlp)
+        self._held: Optional[HeldInputs] = None
         self._markups: Optional[th.Tensor] = None
         self._negative_markups = self._constant = first_weight.new_zeros(())
+
+    def hold(self, held_dims: Sequence[int], initial_states: th.Tensor) -> None:
+        """
+        Declares that the roll-outs of this planning step keep state dimensions ``held_dims`` at their values in
+        ``initial_states``, ``(n_envs, state_dim)``: the kernel then skips those inputs (the torch path ignores this).
+        """
+        if self.native is not None and held_dims:
+            self._held = self.native.hold(held_dims, initial_states, pairs=True)
 
     def __call__(self, states: th.Tensor, markups: th.Tensor, workspace: Workspace) -> th.Tensor:
         """
@@ -241,9 +251,8 @@ class FusedTransitionCost:
             self._negative_markups = -markups
             self._constant = self.mlp.biases[-1] * self._negative_markups.sum()
         if self.native is not None:
-            return self.native.marked_up_sums(flat_states, self._negative_markups, True, costs).add_(self._constant).view(
-                n_envs, n_samples
-            )
+            self.native.marked_up_sums(flat_states, self._negative_markups, True, costs, self._held)
+            return costs.add_(self._constant).view(n_envs, n_samples)
         costs.copy_(self._constant.expand(columns))
         # Chunks of at most chunk_rows() transitions: several whole time steps when one step has few columns, else
         # column blocks of one time step. Either way a chunk's (time, column) rows merge into one stride, so the
@@ -293,7 +302,13 @@ class FusedValue:
     def __init__(self, mlp: FrozenMlp):
         self.mlp = mlp
         self.native = native_mlp(mlp)
+        self._held: Optional[HeldInputs] = None
         self._unit_markup = mlp.weights[0].new_ones(1)
+
+    def hold(self, held_dims: Sequence[int], initial_states: th.Tensor) -> None:
+        """As :meth:`FusedTransitionCost.hold`: states ``(n_envs, ..., state_dim)`` hold ``held_dims`` per env."""
+        if self.native is not None and held_dims:
+            self._held = self.native.hold(held_dims, initial_states, pairs=False)
 
     def __call__(self, states: th.Tensor, workspace: Workspace) -> th.Tensor:
         """
@@ -306,7 +321,7 @@ class FusedValue:
         values = workspace.get("values", (rows,), states)
         mlp = self.mlp
         if self.native is not None:
-            values = self.native.marked_up_sums(flat_states.unsqueeze(0), self._unit_markup, False, values)
+            values = self.native.marked_up_sums(flat_states.unsqueeze(0), self._unit_markup, False, values, self._held)
             return values.add_(mlp.biases[-1]).view(states.shape[:-1])
         rows_per_chunk = chunk_rows()
         for start in range(0, rows, rows_per_chunk):

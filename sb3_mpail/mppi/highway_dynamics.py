@@ -29,6 +29,8 @@ class HighwayKinematics(ParkingKinematics):
     :param kwargs: the other parameters of :class:`~sb3_mpail.mppi.dynamics.ParkingKinematics`
     """
 
+    held_state_dims = ()  # the road scenarios' observations have no goal
+
     def __init__(self, position_scale: float = 10.0, velocity_scale: float = 10.0, **kwargs: Any):
         super().__init__(position_scale=position_scale, velocity_scale=velocity_scale, **kwargs)
 

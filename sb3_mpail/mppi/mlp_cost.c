@@ -7,6 +7,9 @@
  * takes one weight against the vector of BLOCK rows. Each row is computed in the same order whatever the block, the
  * column range or the number of threads, so results do not depend on how the work is split.
  *
+ * Inputs a roll-out holds at their initial values (the bicycle's height, roll, pitch, ...) need not be read: the
+ * caller folds their first-layer terms into a bias per env, and the kernel multiplies only the inputs that move.
+ *
  * Built at run time by sb3_mpail/mppi/native.py with the machine's C compiler; plain C with GCC/Clang vector
  * extensions and OpenMP, linked to the OpenMP runtime torch has loaded so that the kernel runs on torch's own threads
  * (a second pool would compete with torch's, whose threads spin for a while after each parallel operator).
@@ -30,8 +33,51 @@
 #define MIN_COLUMNS_PER_THREAD 256 /* below this, another thread costs more than it saves */
 
 typedef float vector __attribute__((vector_size(LANES * sizeof(float))));
+typedef int mask __attribute__((vector_size(LANES * sizeof(int))));
 
 enum { ACTIVATION_NONE = 0, ACTIVATION_RELU = 1, ACTIVATION_LEAKY_RELU = 2, ACTIVATION_TANH = 3 };
+
+/* The MLP: layer l maps widths[l] inputs to widths[l + 1] outputs (widths[n_layers] == 1, every width <= MAX_WIDTH)
+ * with weights[l], row-major (widths[l], widths[l + 1]), then activations[l] (slopes[l]: a leaky ReLU's). The last
+ * layer's bias is left to the caller. */
+struct mlp {
+    int n_layers;
+    const int *widths;
+    const float *const *weights;
+    const float *const *biases;
+    const int *activations;
+    const float *slopes;
+};
+
+/* The MLP's inputs: x(t, c) = [s(t, c), s(t + 1, c)] when pairs, else s(t, c), for steps t and columns c, feature f of
+ * s(t, c) at states[f * feature_stride + t * time_stride + c * column_stride]. Only the n_read inputs read[] are read
+ * (read NULL: all of them). The others are constant within each group of group_columns consecutive columns: their
+ * first-layer terms are in group_biases, (groups, widths[1]), which replace the first layer's bias (NULL: keep it). */
+struct inputs {
+    const float *states;
+    long feature_stride, time_stride, column_stride;
+    int state_dim, pairs, steps;
+    long columns;
+    int n_read;
+    const int *read;
+    const float *group_biases;
+    long group_columns;
+};
+
+/* One layer for a block: outputs h_u = activation(bias_u + sum_k weight[read[k]][u] * input[k]) for u < n_out */
+struct layer {
+    const float *input;
+    int n_in;
+    const int *read;       /* the weight rows of the inputs, NULL: 0 .. n_in - 1 */
+    const float *weight;   /* row-major (inputs, n_out): a pass's weights for one input are adjacent */
+    int n_out;
+    const float *bias;     /* (n_out,), NULL: none */
+    const float *row_bias; /* (n_out, BLOCK), a bias per row instead of bias, NULL: none */
+    int activation;
+    float slope;
+    float *output;            /* (n_out, BLOCK) */
+    const float *next_weight; /* not NULL when the next layer is the single output unit: (n_out,), see dense_units */
+};
 
 static inline vector load(const float *source) { return *(const vector *)source; }
 static inline void store(float *target, vector value) { *(vector *)target = value; }
@@ -40,113 +86,171 @@ static inline vector splat(float value) {
     return zero + value;
 }
 
-/* output[j] = bias[j] + sum_k weight[j][k] * input[k] for a block; weight row-major (n_out, n_in), bias may be NULL */
-static void dense(const float *input, int n_in, float *output, int n_out, const float *weight, const float *bias) {
-    int j = 0;
-    for (; j + GROUP <= n_out; j += GROUP) {
-        vector sums[GROUP][VECTORS];
-        for (int u = 0; u < GROUP; u++)
-            for (int v = 0; v < VECTORS; v++) sums[u][v] = splat(bias ? bias[j + u] : 0.f);
-        for (int k = 0; k < n_in; k++) {
-            vector rows[VECTORS];
-            for (int v = 0; v < VECTORS; v++) rows[v] = load(input + k * BLOCK + v * LANES);
-            for (int u = 0; u < GROUP; u++) {
-                float w = weight[(size_t)(j + u) * n_in + k];
-                for (int v = 0; v < VECTORS; v++) sums[u][v] += w * rows[v];
-            }
-        }
-        for (int u = 0; u < GROUP; u++)
-            for (int v = 0; v < VECTORS; v++) store(output + (j + u) * BLOCK + v * LANES, sums[u][v]);
-    }
-    for (; j < n_out; j++) {
-        vector sums[VECTORS];
-        for (int v = 0; v < VECTORS; v++) sums[v] = splat(bias ? bias[j] : 0.f);
-        for (int k = 0; k < n_in; k++) {
-            float w = weight[(size_t)j * n_in + k];
-            for (int v = 0; v < VECTORS; v++) sums[v] += w * load(input + k * BLOCK + v * LANES);
-        }
-        for (int v = 0; v < VECTORS; v++) store(output + j * BLOCK + v * LANES, sums[v]);
-    }
+static inline vector activate(vector values, int activation, float slope) {
+    vector zero = {0};
+    mask positive = values > zero;
+    if (activation == ACTIVATION_RELU) return (vector)((mask)values & positive);
+    if (activation == ACTIVATION_LEAKY_RELU)
+        return (vector)(((mask)values & positive) | ((mask)(values * slope) & ~positive));
+    if (activation == ACTIVATION_TANH)
+        for (int i = 0; i < LANES; i++) values[i] = tanhf(values[i]);
+    return values;
 }
 
-static void activate(float *values, int width, int activation, float slope) {
-    int count = width * BLOCK;
-    if (activation == ACTIVATION_RELU) {
-        for (int i = 0; i < count; i++) values[i] = values[i] > 0.f ? values[i] : 0.f;
-    } else if (activation == ACTIVATION_LEAKY_RELU) {
-        for (int i = 0; i < count; i++) values[i] = values[i] > 0.f ? values[i] : values[i] * slope;
-    } else if (activation == ACTIVATION_TANH) {
-        for (int i = 0; i < count; i++) values[i] = tanhf(values[i]);
+/*
+ * Output units j .. j + count - 1 of a layer for a block, stored in its output, or, when the next layer is the single
+ * output unit, never stored: folded into that unit's sum, result += next_weight[u] * h_u. Inlined with a constant
+ * count, so the accumulators stay in registers.
+ */
+static inline __attribute__((always_inline)) void dense_units(const struct layer *layer, int j, int count,
+                                                              int indexed, vector *result) {
+    /* locals, so the compiler need not reload them after each store to the output */
+    const float *input = layer->input, *weight = layer->weight, *bias = layer->bias, *row_bias = layer->row_bias;
+    const float *next_weight = layer->next_weight;
+    const int *read = layer->read; /* used when indexed, a constant that specialises the loop */
+    int n_in = layer->n_in, n_out = layer->n_out, activation = layer->activation;
+    float slope = layer->slope, *output = layer->output;
+    vector sums[GROUP][VECTORS];
+    for (int u = 0; u < count; u++)
+        for (int v = 0; v < VECTORS; v++)
+            sums[u][v] = row_bias ? load(row_bias + (j + u) * BLOCK + v * LANES) : splat(bias ? bias[j + u] : 0.f);
+    for (int k = 0; k < n_in; k++) {
+        vector rows[VECTORS];
+        for (int v = 0; v < VECTORS; v++) rows[v] = load(input + k * BLOCK + v * LANES);
+        const float *weights = weight + (size_t)(indexed ? read[k] : k) * n_out + j;
+        for (int u = 0; u < count; u++) {
+            float w = weights[u];
+            for (int v = 0; v < VECTORS; v++) sums[u][v] += w * rows[v];
+        }
+    }
+    for (int u = 0; u < count; u++)
+        for (int v = 0; v < VECTORS; v++) {
+            vector unit = activate(sums[u][v], activation, slope);
+            if (next_weight)
+                result[v] += next_weight[j + u] * unit;
+            else
+                store(output + (j + u) * BLOCK + v * LANES, unit);
+        }
+}
+
+/* a whole layer for a block, GROUP output units per pass over its inputs */
+static void dense(const struct layer *layer, vector *result) {
+    int j = 0, indexed = layer->read != NULL;
+    if (indexed) {
+        for (; j + GROUP <= layer->n_out; j += GROUP) dense_units(layer, j, GROUP, 1, result);
+        for (; j < layer->n_out; j++) dense_units(layer, j, 1, 1, result);
+    } else {
+        for (; j + GROUP <= layer->n_out; j += GROUP) dense_units(layer, j, GROUP, 0, result);
+        for (; j < layer->n_out; j++) dense_units(layer, j, 1, 0, result);
     }
 }
 
 int mlp_max_width(void) { return MAX_WIDTH; }
 
+/* first[k * BLOCK + i] = input k read of column block + i at step t, zero past the range's end; offsets[k]: where
+ * input k of column 0 at step 0 is */
+static void gather_inputs(const struct inputs *in, const long *offsets, int t, long block, int n, float *first) {
+    long column_stride = in->column_stride;
+    for (int k = 0; k < in->n_read; k++) {
+        const float *source = in->states + offsets[k] + t * in->time_stride + block * column_stride;
+        float *row = first + k * BLOCK;
+        int i = 0;
+        if (column_stride == 1)
+            for (; i < n; i++) row[i] = source[i];
+        else
+            for (; i < n; i++) row[i] = source[i * column_stride];
+        for (; i < BLOCK; i++) row[i] = 0.f;
+    }
+}
+
+/* row_bias[u * BLOCK + i] = the group bias of unit u for column block + i (padding rows take the block's first) */
+static void gather_group_biases(const struct inputs *in, int width, long block, int n, float *row_bias) {
+    for (int i = 0; i < BLOCK; i++) {
+        const float *bias = in->group_biases + (block + (i < n ? i : 0)) / in->group_columns * width;
+        for (int u = 0; u < width; u++) row_bias[u * BLOCK + i] = bias[u];
+    }
+}
+
 /* out[c] for columns c in [begin, end) of mlp_costs; out points at column begin */
-static void column_range(const float *states, long feature_stride, long time_stride, long column_stride, int state_dim,
-                         int pairs, int steps, long begin, long end, int n_layers, const int *widths,
-                         const float *const *weights, const float *const *biases, const int *activations,
-                         const float *slopes, const float *markups, float *out) {
+static void column_range(const struct inputs *in, const struct mlp *mlp, const float *markups, long begin, long end,
+                         float *out) {
     float first[MAX_WIDTH * BLOCK] __attribute__((aligned(64)));
     float second[MAX_WIDTH * BLOCK] __attribute__((aligned(64)));
-    int n_inputs = pairs ? 2 * state_dim : state_dim;
+    float row_bias[MAX_WIDTH * BLOCK] __attribute__((aligned(64)));
+    long biased_group = -1; /* the group whose biases row_bias holds for every row, -1: none */
+    long offsets[MAX_WIDTH];
+    for (int k = 0; k < in->n_read; k++) {
+        int input = in->read ? in->read[k] : k; /* feature input % state_dim of state t + input / state_dim */
+        offsets[k] = (input % in->state_dim) * in->feature_stride + (input / in->state_dim) * in->time_stride;
+    }
     /* time steps outermost: each block's inputs are the next BLOCK floats of every feature, a stream of reads */
-    for (int t = 0; t < steps; t++) {
+    for (int t = 0; t < in->steps; t++) {
         for (long block = begin; block < end; block += BLOCK) {
             int n = end - block < BLOCK ? (int)(end - block) : BLOCK;
-            for (int k = 0; k < n_inputs; k++) {
-                const float *source = states + (k % state_dim) * feature_stride
-                                      + (t + k / state_dim) * time_stride + block * column_stride;
-                float *row = first + k * BLOCK;
-                int i = 0;
-                if (column_stride == 1)
-                    for (; i < n; i++) row[i] = source[i];
-                else
-                    for (; i < n; i++) row[i] = source[i * column_stride];
-                for (; i < BLOCK; i++) row[i] = 0.f;
+            gather_inputs(in, offsets, t, block, n, first);
+            const float *first_row_bias = NULL;
+            if (in->group_biases) {
+                long group = block / in->group_columns, last_group = (block + n - 1) / in->group_columns;
+                if (group != last_group || group != biased_group) {
+                    gather_group_biases(in, mlp->widths[1], block, n, row_bias);
+                    biased_group = group == last_group ? group : -1;
+                }
+                first_row_bias = row_bias;
             }
+            /* z: the output unit's sum, into which the last hidden layer's units go straight */
+            vector z[VECTORS] = {0};
             float *input = first, *output = second;
-            for (int layer = 0; layer < n_layers; layer++) {
-                dense(input, widths[layer], output, widths[layer + 1], weights[layer], biases[layer]);
-                activate(output, widths[layer + 1], activations[layer], slopes[layer]);
+            for (int l = 0; l < mlp->n_layers; l++) {
+                int last = l + 1 == mlp->n_layers, last_hidden = l + 2 == mlp->n_layers;
+                struct layer layer = {
+                    .input = input,
+                    .n_in = l == 0 ? in->n_read : mlp->widths[l],
+                    .read = l == 0 ? in->read : NULL,
+                    .weight = mlp->weights[l],
+                    .n_out = mlp->widths[l + 1],
+                    .bias = last || (l == 0 && first_row_bias) ? NULL : mlp->biases[l],
+                    .row_bias = l == 0 ? first_row_bias : NULL,
+                    .activation = last ? ACTIVATION_NONE : mlp->activations[l],
+                    .slope = mlp->slopes[l],
+                    .output = output,
+                    .next_weight = last_hidden ? mlp->weights[l + 1] : NULL,
+                };
+                dense(&layer, z);
+                if (last) /* a single layer: its output unit was stored, not folded */
+                    for (int v = 0; v < VECTORS; v++) z[v] = load(output + v * LANES);
+                if (last_hidden) break;
                 float *swap = input;
                 input = output;
                 output = swap;
             }
+            const float *outputs = (const float *)z;
             float *totals = out + (block - begin);
             if (t == 0)
-                for (int i = 0; i < n; i++) totals[i] = markups[0] * input[i];
+                for (int i = 0; i < n; i++) totals[i] = markups[0] * outputs[i];
             else
-                for (int i = 0; i < n; i++) totals[i] += markups[t] * input[i];
+                for (int i = 0; i < n; i++) totals[i] += markups[t] * outputs[i];
         }
     }
 }
 
 /*
- * out[c] = sum_{t < steps} markups[t] * z(t, c) for columns c < columns, where z is the MLP's single output (its last
- * layer's bias left out) on the input x(t, c) = [s(t, c), s(t + 1, c)] when pairs, else s(t, c), and feature f of
- * s(t, c) is states[f * feature_stride + t * time_stride + c * column_stride].
- * Layer l maps widths[l] inputs to widths[l + 1] outputs (widths[n_layers] == 1), every width <= MAX_WIDTH.
- * The columns are split into one contiguous range of whole blocks per thread, at most max_threads (torch's count).
+ * out[c] = sum_{t < steps} markups[t] * z(t, c) for columns c < in->columns, where z is the MLP's single output (its
+ * last layer's bias left out) on the inputs x(t, c). The columns are split into one contiguous range of whole blocks
+ * per thread, at most max_threads (torch's count).
  */
-void mlp_costs(const float *states, long feature_stride, long time_stride, long column_stride, int state_dim,
-               int pairs, int steps, long columns, int n_layers, const int *widths, const float *const *weights,
-               const float *const *biases, const int *activations, const float *slopes, const float *markups,
-               float *out, int max_threads) {
-    long threads = columns / MIN_COLUMNS_PER_THREAD;
+void mlp_costs(const struct inputs *in, const struct mlp *mlp, const float *markups, float *out, int max_threads) {
+    long threads = in->columns / MIN_COLUMNS_PER_THREAD;
     if (threads > max_threads) threads = max_threads;
     if (threads <= 1) {
-        column_range(states, feature_stride, time_stride, column_stride, state_dim, pairs, steps, 0, columns, n_layers,
-                     widths, weights, biases, activations, slopes, markups, out);
+        column_range(in, mlp, markups, 0, in->columns, out);
         return;
     }
-    long n_blocks = (columns + BLOCK - 1) / BLOCK;
+    long n_blocks = (in->columns + BLOCK - 1) / BLOCK;
 #pragma omp parallel num_threads(threads)
     {
         long count = omp_get_num_threads(), thread = omp_get_thread_num();
         long begin = n_blocks * thread / count * BLOCK, end = n_blocks * (thread + 1) / count * BLOCK;
-        if (end > columns) end = columns;
-        column_range(states, feature_stride, time_stride, column_stride, state_dim, pairs, steps, begin, end, n_layers,
-                     widths, weights, biases, activations, slopes, markups, out + begin);
+        if (end > in->columns) end = in->columns;
+        column_range(in, mlp, markups, begin, end, out + begin);
     }
 }

@@ -22,9 +22,10 @@ import shutil
 import subprocess
 import tempfile
 import warnings
+from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
-from typing import List, Optional
+from typing import List, Optional, Sequence
 
 import torch as th
 
@@ -117,13 +118,59 @@ def load_library() -> Optional[ctypes.CDLL]:
     except (OSError, RuntimeError, subprocess.SubprocessError) as error:
         warnings.warn(f"sb3_mpail: the planner's CPU kernel is unavailable ({error}); using the torch path", stacklevel=2)
         return None
-    pointer = ctypes.c_void_p
     library.mlp_max_width.restype = ctypes.c_int
     library.mlp_costs.restype = None
-    integer, long = ctypes.c_int, ctypes.c_long
-    library.mlp_costs.argtypes = [pointer, long, long, long, integer, integer, integer, long, integer] + [pointer] * 7
-    library.mlp_costs.argtypes += [integer]
+    pointer = ctypes.c_void_p
+    library.mlp_costs.argtypes = [ctypes.POINTER(_Inputs), ctypes.POINTER(_Mlp), pointer, pointer, ctypes.c_int]
     return library
+
+
+class _Mlp(ctypes.Structure):
+    """``struct mlp`` of ``mlp_cost.c``."""
+
+    _fields_ = [
+        ("n_layers", ctypes.c_int),
+        ("widths", ctypes.c_void_p),
+        ("weights", ctypes.c_void_p),
+        ("biases", ctypes.c_void_p),
+        ("activations", ctypes.c_void_p),
+        ("slopes", ctypes.c_void_p),
+    ]
+
+
+class _Inputs(ctypes.Structure):
+    """``struct inputs`` of ``mlp_cost.c``."""
+
+    _fields_ = [
+        ("states", ctypes.c_void_p),
+        ("feature_stride", ctypes.c_long),
+        ("time_stride", ctypes.c_long),
+        ("column_stride", ctypes.c_long),
+        ("state_dim", ctypes.c_int),
+        ("pairs", ctypes.c_int),
+        ("steps", ctypes.c_int),
+        ("columns", ctypes.c_long),
+        ("n_read", ctypes.c_int),
+        ("read", ctypes.c_void_p),
+        ("group_biases", ctypes.c_void_p),
+        ("group_columns", ctypes.c_long),
+    ]
+
+
+@dataclass
+class HeldInputs:
+    """
+    Inputs of the MLP that are constant within each group of consecutive columns (one group per env: state
+    dimensions a roll-out holds at their initial values), folded into a first-layer bias per group.
+
+    :param read: the inputs that are not held, which the kernel reads
+    :param group_biases: per group, the first layer's bias plus the held inputs' terms, ``(groups, first width)``
+    :param input_size: the MLP's number of inputs
+    """
+
+    read: "ctypes.Array[ctypes.c_int]"
+    group_biases: th.Tensor
+    input_size: int
 
 
 class NativeMlp:
@@ -132,7 +179,7 @@ class NativeMlp:
     Build it with :meth:`from_layers`, which returns ``None`` where the kernel cannot take the network.
 
     :param library: the loaded kernel
-    :param weights: per layer, the weight ``(out, in)``, contiguous float32
+    :param weights: per layer, the weight ``(in, out)``, contiguous float32
     :param biases: per layer but the last, the bias ``(out,)``
     :param activation_codes: per layer, the kernel's code of the activation after it (0: none)
     :param slopes: per layer, the negative slope of a leaky ReLU (else unused)
@@ -149,13 +196,20 @@ class NativeMlp:
         self.library = library
         self.weights, self.biases = weights, biases  # kept alive: the kernel reads them through the pointers below
         n_layers = len(weights)
-        self.n_layers = n_layers
-        self.input_size = weights[0].shape[1]
-        self._widths = (ctypes.c_int * (n_layers + 1))(self.input_size, *[weight.shape[0] for weight in weights])
+        self.input_size = weights[0].shape[0]
+        self._widths = (ctypes.c_int * (n_layers + 1))(self.input_size, *[weight.shape[1] for weight in weights])
         self._weights = (ctypes.c_void_p * n_layers)(*[weight.data_ptr() for weight in weights])
         self._biases = (ctypes.c_void_p * n_layers)(*[bias.data_ptr() for bias in biases], None)
         self._activations = (ctypes.c_int * n_layers)(*activation_codes)
         self._slopes = (ctypes.c_float * n_layers)(*slopes)
+        self._mlp = _Mlp(
+            n_layers,
+            ctypes.addressof(self._widths),
+            ctypes.addressof(self._weights),
+            ctypes.addressof(self._biases),
+            ctypes.addressof(self._activations),
+            ctypes.addressof(self._slopes),
+        )
 
     @classmethod
     def from_layers(
@@ -182,13 +236,41 @@ class NativeMlp:
         codes = [0 if name is None else ACTIVATION_CODES[name] for name in activations]
         return cls(
             library,
-            [weight.t().contiguous() for weight in weights],
+            [weight.contiguous() for weight in weights],
             [bias.contiguous() for bias in biases[:-1]],
             codes,
             [float(slope) for slope in slopes],
         )
 
-    def marked_up_sums(self, states: th.Tensor, markups: th.Tensor, pairs: bool, out: th.Tensor) -> th.Tensor:
+    def hold(self, held_dims: Sequence[int], initial_states: th.Tensor, pairs: bool) -> HeldInputs:
+        """
+        The MLP's inputs from state dimensions ``held_dims`` of ``initial_states``, folded into a first-layer bias per
+        env, for :meth:`marked_up_sums` on roll-outs that keep those dimensions at their initial values.
+
+        :param held_dims: the state dimensions held
+        :param initial_states: ``(n_envs, state_dim)``, CPU float32
+        :param pairs: whether the MLP's input is a transition ``[s, s']`` (both halves then hold)
+        """
+        state_dim = initial_states.shape[-1]
+        if (2 if pairs else 1) * state_dim != self.input_size:
+            raise ValueError(f"the MLP takes {self.input_size} inputs, not {'2 x ' if pairs else ''}{state_dim}")
+        dims = sorted(set(held_dims))
+        if dims and not 0 <= dims[0] <= dims[-1] < state_dim:
+            raise ValueError(f"held state dimensions {dims} out of range for {state_dim}-D states")
+        first_weight = self.weights[0]
+        held_weight = first_weight[dims]
+        if pairs:  # s and s' of a transition hold the same values
+            held_weight = held_weight + first_weight[[state_dim + dim for dim in dims]]
+        group_biases = initial_states[:, dims].to(held_weight) @ held_weight
+        if len(self.weights) > 1:  # a single layer's bias is the output bias, the caller's
+            group_biases += self.biases[0]
+        held_inputs = set(dims) | ({state_dim + dim for dim in dims} if pairs else set())
+        read = [index for index in range(self.input_size) if index not in held_inputs]
+        return HeldInputs((ctypes.c_int * len(read))(*read), group_biases.contiguous(), self.input_size)
+
+    def marked_up_sums(
+        self, states: th.Tensor, markups: th.Tensor, pairs: bool, out: th.Tensor, held: Optional[HeldInputs] = None
+    ) -> th.Tensor:
         """
         ``out[c] = sum_t markups[t] z(t, c)``, with ``z`` the MLP's output before its last bias on
         ``[states[t, c], states[t + 1, c]]`` (``pairs``) or on ``states[t, c]``.
@@ -198,6 +280,8 @@ class NativeMlp:
         :param markups: ``(steps,)``, CPU float32
         :param pairs: whether the MLP's input is a transition ``[s, s']``
         :param out: ``(columns,)``, contiguous CPU float32
+        :param held: inputs constant within each env's columns (from :meth:`hold`), which are then not read; the
+            columns are the envs' in turn, as many per env
         :return: ``out``
         """
         n_states, columns, state_dim = states.shape
@@ -209,11 +293,21 @@ class NativeMlp:
             raise ValueError(f"expected {steps} markups and a contiguous output of {columns} columns")
         if any(tensor.dtype != th.float32 or tensor.device.type != "cpu" for tensor in (states, markups, out)):
             raise ValueError("the CPU kernel takes CPU float32 tensors only")
+        read, n_read, group_biases, group_columns = None, self.input_size, None, 0
+        if held is not None:
+            groups = held.group_biases.shape[0]
+            if held.input_size != self.input_size or held.group_biases.shape[1:] != (self.weights[0].shape[1],):
+                raise ValueError("these held inputs were made for another MLP")
+            if groups == 0 or columns % groups != 0:
+                raise ValueError(f"{columns} columns do not split into the {groups} groups of the held inputs")
+            read, n_read = ctypes.addressof(held.read), len(held.read)
+            group_biases, group_columns = held.group_biases.data_ptr(), columns // groups
         markups = markups.contiguous()
         time_stride, column_stride, feature_stride = states.stride()
-        self.library.mlp_costs(
+        inputs = _Inputs(
             states.data_ptr(), feature_stride, time_stride, column_stride, state_dim, int(pairs), steps, columns,
-            self.n_layers, self._widths, self._weights, self._biases, self._activations, self._slopes,
-            markups.data_ptr(), out.data_ptr(), th.get_num_threads(),
+            n_read, read, group_biases, group_columns,
         )  # fmt: skip
+        threads = th.get_num_threads()
+        self.library.mlp_costs(ctypes.byref(inputs), ctypes.byref(self._mlp), markups.data_ptr(), out.data_ptr(), threads)
         return out

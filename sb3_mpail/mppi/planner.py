@@ -20,7 +20,7 @@ is :func:`sb3_mpail.mppi.reference.reference_plan`; this planner gives the same 
 * optionally the roll-out/cost/weight update is compiled with ``torch.compile`` (``compile_planner``).
 """
 
-from typing import Callable, NamedTuple, Optional, Tuple, Union
+from typing import Callable, NamedTuple, Optional, Sequence, Tuple, Union
 
 import torch as th
 from torch import nn
@@ -76,8 +76,11 @@ def rollout(dynamics: DynamicsFunction, initial_states: th.Tensor, actions: th.T
 
 
 def weighted_mean(weights: th.Tensor, actions: th.Tensor) -> th.Tensor:
-    """:func:`~sb3_mpail.mppi.reference.weighted_plan` as one batched matrix-vector product (no permuted copies)."""
-    return th.matmul(actions.transpose(2, 3), weights.unsqueeze(-1)).squeeze(-1).transpose(0, 1)
+    """
+    :func:`~sb3_mpail.mppi.reference.weighted_plan` as one batched product ``w_e (N x A block of step t, env e)``,
+    which reads the samples in place (twice as fast at 64 envs as ``(A x N) w_e`` over the transposed blocks).
+    """
+    return th.matmul(weights.unsqueeze(1), actions).squeeze(2).transpose(0, 1)
 
 
 class TrajectoryCost:
@@ -92,6 +95,8 @@ class TrajectoryCost:
     :param states: the current states, ``(n_envs, state_dim)`` (their size, device and dtype are used)
     :param workspace: scratch tensors of the fused views
     :param fused: use the fused views where available
+    :param held_dims: state dimensions the roll-outs keep at their values in ``states`` (the dynamics model's
+        ``held_state_dims``), which the fused views then need not read
     """
 
     def __init__(
@@ -103,6 +108,7 @@ class TrajectoryCost:
         states: th.Tensor,
         workspace: Workspace,
         fused: bool = True,
+        held_dims: Sequence[int] = (),
     ):
         self.step_cost = step_cost
         self.terminal_value = terminal_value
@@ -112,6 +118,9 @@ class TrajectoryCost:
         state_dim = states.shape[-1]
         self.fused_step_cost = _planning_view(step_cost, state_dim) if fused else None
         self.fused_value = _planning_view(terminal_value, state_dim) if fused else None
+        for view in (self.fused_step_cost, self.fused_value):
+            if held_dims and hasattr(view, "hold"):
+                view.hold(held_dims, states)
 
     def __call__(self, states: th.Tensor) -> th.Tensor:
         """
@@ -207,6 +216,7 @@ class MPPIPlanner(nn.Module):
             states,
             self._workspace,
             fused=not self.compile_planner,
+            held_dims=getattr(self.dynamics, "held_state_dims", ()),
         )
 
     def forward(

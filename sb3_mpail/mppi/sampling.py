@@ -1,6 +1,7 @@
 """Action-sequence samplers for MPPI: perturb the warm-started plan into ``N`` candidate sequences."""
 
-from typing import Optional, Union
+import math
+from typing import Optional, Tuple, Union
 
 import numpy as np
 import torch as th
@@ -27,8 +28,7 @@ class GaussianSampler(nn.Module):
         self.register_buffer("action_low", low)
         self.register_buffer("action_high", high)
         self.register_buffer("noise_std", th.as_tensor(noise_std, dtype=th.float32) * (high - low) / 2)
-        # Plain numbers when every action dimension shares them: scalar operands take the vectorised kernels, while
-        # broadcasting a per-dimension tensor over the short last dimension does not.
+        # plain numbers when every action dimension shares them: scalar operands are the fastest
         self._uniform_std = _common_value(self.noise_std)
         self._uniform_bounds = (_common_value(low), _common_value(high))
 
@@ -43,12 +43,29 @@ class GaussianSampler(nn.Module):
         # one draw for all envs x samples x steps: a single kernel, independent noise per env
         noise = th.randn(horizon, n_envs, n_samples, action_dim, generator=generator, device=plan.device, dtype=plan.dtype)
         # in place on the fresh noise tensor: the samples stay contiguous and no second buffer is allocated
-        actions = noise.mul_(self.noise_std if self._uniform_std is None else self._uniform_std)
-        actions.add_(plan.transpose(0, 1).unsqueeze(2))
+        rows, tile = sample_rows(noise)
+        rows.mul_(self.noise_std.repeat(tile) if self._uniform_std is None else self._uniform_std)
+        rows.add_(plan.transpose(0, 1).unsqueeze(2).repeat(1, 1, 1, tile))
         low, high = self._uniform_bounds
         if low is None or high is None:
-            return th.clamp_(actions, self.action_low, self.action_high)
-        return th.clamp_(actions, low, high)
+            rows.clamp_(self.action_low.repeat(tile), self.action_high.repeat(tile))
+        else:
+            rows.clamp_(low, high)
+        return noise
+
+
+def sample_rows(samples: th.Tensor) -> Tuple[th.Tensor, int]:
+    """
+    ``samples`` ``(..., N, action_dim)`` viewed as rows of ``tile`` consecutive samples, ``(..., N / tile, tile *
+    action_dim)``, with ``tile`` a divisor of ``N`` up to 32: an operand per action dimension, repeated ``tile`` times,
+    then broadcasts over long rows. Broadcast over ``(..., N, action_dim)`` directly, torch's CPU loops run
+    ``action_dim`` elements at a time: adding the plan that way took 3 to 6 times longer at 64 envs.
+
+    :return: the view and ``tile``
+    """
+    *leading, n_samples, action_dim = samples.shape
+    tile = math.gcd(n_samples, 32)
+    return samples.view(*leading, n_samples // tile, tile * action_dim), tile
 
 
 def _common_value(values: th.Tensor) -> Optional[float]:
