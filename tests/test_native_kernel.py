@@ -214,3 +214,17 @@ def test_the_kernel_can_be_switched_off(fresh_build, monkeypatch):
         warnings.simplefilter("error")
         assert native.load_library() is None
     assert list(Path(fresh_build).iterdir()) == []
+
+
+def test_the_planner_kernel_reads_only_the_state_dims_the_bicycle_moves():
+    from sb3_mpail.envs.navigation import NavigationEnv
+    from sb3_mpail.policies import MPPIPolicy
+
+    env = NavigationEnv()
+    policy = MPPIPolicy(env.observation_space, env.action_space, dynamics="bicycle")
+    policy.set_training_mode(False)
+    with th.no_grad():
+        cost = policy.planner.trajectory_cost(th.randn(2, 12), horizon=10)
+    moving = [0, 1, 5, 6, 7, 11]  # x, y, yaw, vx, vy, wz: the held ones are folded into a bias per env
+    assert list(cost.fused_step_cost._held.read) == moving + [12 + dim for dim in moving]
+    assert list(cost.fused_value._held.read) == moving

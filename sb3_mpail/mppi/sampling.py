@@ -43,7 +43,7 @@ class GaussianSampler(nn.Module):
         # one draw for all envs x samples x steps: a single kernel, independent noise per env
         noise = th.randn(horizon, n_envs, n_samples, action_dim, generator=generator, device=plan.device, dtype=plan.dtype)
         # in place on the fresh noise tensor: the samples stay contiguous and no second buffer is allocated
-        rows, tile = sample_rows(noise)
+        rows, tile = _sample_rows(noise)
         rows.mul_(self.noise_std.repeat(tile) if self._uniform_std is None else self._uniform_std)
         rows.add_(plan.transpose(0, 1).unsqueeze(2).repeat(1, 1, 1, tile))
         low, high = self._uniform_bounds
@@ -54,7 +54,7 @@ class GaussianSampler(nn.Module):
         return noise
 
 
-def sample_rows(samples: th.Tensor) -> Tuple[th.Tensor, int]:
+def _sample_rows(samples: th.Tensor) -> Tuple[th.Tensor, int]:
     """
     ``samples`` ``(..., N, action_dim)`` viewed as rows of ``tile`` consecutive samples, ``(..., N / tile, tile *
     action_dim)``, with ``tile`` a divisor of ``N`` up to 32: an operand per action dimension, repeated ``tile`` times,
