@@ -1,5 +1,8 @@
 """The optimised planner computes the same plans as the plain reference implementation (paper Alg. 2 as written)."""
 
+import copy
+import pickle
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -158,6 +161,65 @@ def test_fused_views_are_used_only_when_planning():
         assert step_cost.planning_view(12) is None and value.planning_view(12) is None
     policy.set_training_mode(False)
     assert step_cost.planning_view(12) is None and value.planning_view(12) is None  # gradients enabled
+
+
+def view_costs(step_cost, value, states: th.Tensor) -> tuple:
+    """Step costs of consecutive states and values through the planning views, and through the modules."""
+    rolled_out = states.view(4, 1, 4, 12)
+    markups = th.ones(3, dtype=states.dtype)
+    with th.no_grad():
+        step_view, value_view = step_cost.planning_view(12), value.planning_view(12)
+        fused_costs = step_view(rolled_out, markups, fused.Workspace()).clone()
+        fused_values = value_view(states, fused.Workspace()).clone()
+        module_costs = step_cost(rolled_out[:-1], rolled_out[1:]).sum(0)
+        module_values = value(states)
+    return (step_view, value_view), (fused_costs, fused_values), (module_costs, module_values)
+
+
+def test_planning_views_are_reused_until_the_networks_change():
+    policy = make_policy(NAVIGATION, "bicycle")
+    step_cost, value = policy.planner.step_cost, policy.planner.terminal_value
+    states = navigation_states(16)
+    views, _, _ = view_costs(step_cost, value, states)
+    assert view_costs(step_cost, value, states)[0] == views  # nothing changed: the same frozen weights
+    discriminator, value_net = step_cost.discriminator, value.value_network
+    optimizer = th.optim.SGD([*discriminator.parameters(), *value_net.parameters()], lr=0.5)
+    changes = {
+        "an optimiser step": lambda: optimizer.step(),
+        "load_state_dict": lambda: (
+            discriminator.load_state_dict({k: v + 0.1 for k, v in discriminator.state_dict().items()}),
+            value_net.load_state_dict({k: v * 0.9 for k, v in value_net.state_dict().items()}),
+        ),
+        "tensors swapped through .data": lambda: [
+            setattr(parameter, "data", parameter.data * 1.1)
+            for parameter in (*discriminator.parameters(), *value_net.parameters())
+        ],
+    }
+    for name, change in changes.items():
+        for parameter in (*discriminator.parameters(), *value_net.parameters()):
+            parameter.grad = th.ones_like(parameter)
+        before = view_costs(step_cost, value, states)
+        change()
+        new_views, fused_results, module_results = view_costs(step_cost, value, states)
+        assert all(new is not old for new, old in zip(new_views, before[0])), name
+        assert not th.allclose(fused_results[0], before[1][0]), name  # the change moved the costs...
+        for fused_result, module_result in zip(fused_results, module_results):  # ...and the views followed
+            assert th.allclose(fused_result, module_result, atol=1e-9, rtol=0), name
+
+
+def test_copies_of_costs_with_planning_views_rebuild_their_own():
+    policy = make_policy(NAVIGATION, "bicycle", dtype=th.float32)
+    step_cost, value = policy.planner.step_cost, policy.planner.terminal_value
+    states = navigation_states(16, dtype=th.float32)
+    views, _, _ = view_costs(step_cost, value, states)
+    assert views[0].native is not None or fused.native_mlp(views[0].mlp) is None  # the kernel's view (pointers)
+    # spectral-normed modules pickle only through their state_dict: the discriminator's cost is deep-copied only
+    for copy_of_value in (copy.deepcopy, lambda module: pickle.loads(pickle.dumps(module))):
+        step_copy, value_copy = copy.deepcopy(step_cost), copy_of_value(value)
+        copied_views, fused_results, module_results = view_costs(step_copy, value_copy, states)
+        assert copied_views[0] is not views[0] and copied_views[1] is not views[1]
+        for fused_result, module_result in zip(fused_results, module_results):
+            assert th.allclose(fused_result, module_result, atol=1e-4, rtol=1e-4)
 
 
 def test_planning_with_gradients_enabled_matches_the_reference():

@@ -15,7 +15,7 @@ from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
 from torch.nn.utils.parametrizations import spectral_norm
 
-from sb3_mpail.mppi.fused import FusedTransitionCost, FusedValue, freeze_mlp, fused_mlp_ok
+from sb3_mpail.mppi.fused import FusedTransitionCost, FusedValue, ViewCache, freeze_mlp, fused_mlp_ok
 
 FeatureSpec = Union[nn.Module, Callable[[th.Tensor], th.Tensor], Sequence[int]]
 
@@ -133,6 +133,7 @@ class TransitionCost(nn.Module):
         super().__init__()
         self.discriminator = discriminator
         self.features = features
+        self._planning_views: ViewCache[FusedTransitionCost] = ViewCache()
 
     def forward(self, states: th.Tensor, next_states: th.Tensor) -> th.Tensor:
         batch_shape = states.shape[:-1]
@@ -143,7 +144,7 @@ class TransitionCost(nn.Module):
 
     def planning_view(self, state_dim: int) -> Optional[FusedTransitionCost]:
         """
-        The fused whole-horizon cost with the discriminator's weights frozen for one planning step, or ``None``
+        The fused whole-horizon cost with the discriminator's weights frozen (until they change), or ``None``
         where the module path must be used: gradients enabled, training mode (spectral norm's power iteration
         then updates its vectors on every call), a feature map, or a discriminator other than an MLP on ``(s, s')``.
 
@@ -154,10 +155,12 @@ class TransitionCost(nn.Module):
             return None
         if not (net.use_state and net.use_next_state) or net.use_action or net.use_done:
             return None
-        mlp = freeze_mlp(net.mlp)
-        if not fused_mlp_ok(mlp, 2 * state_dim):
-            return None
-        return FusedTransitionCost(mlp, state_dim)
+
+        def build() -> Optional[FusedTransitionCost]:
+            mlp = freeze_mlp(net.mlp)
+            return FusedTransitionCost(mlp, state_dim) if fused_mlp_ok(mlp, 2 * state_dim) else None
+
+        return self._planning_views.get(net.mlp, state_dim, build)
 
 
 class TerminalValue(nn.Module):
@@ -170,18 +173,23 @@ class TerminalValue(nn.Module):
     def __init__(self, value_network: nn.Module):
         super().__init__()
         self.value_network = value_network
+        self._planning_views: ViewCache[FusedValue] = ViewCache()
 
     def forward(self, states: th.Tensor) -> th.Tensor:
         return self.value_network(states.reshape(-1, states.shape[-1])).view(states.shape[:-1])
 
     def planning_view(self, state_dim: int) -> Optional[FusedValue]:
         """
-        The value with its weights frozen for one planning step, or ``None`` where the module path must be used
+        The value with its weights frozen (until they change), or ``None`` where the module path must be used
         (gradients enabled, training mode or a network other than a plain MLP).
 
         :param state_dim: size of a state
         """
         if th.is_grad_enabled() or self.value_network.training:
             return None
-        mlp = freeze_mlp(self.value_network)
-        return FusedValue(mlp) if fused_mlp_ok(mlp, state_dim) else None
+
+        def build() -> Optional[FusedValue]:
+            mlp = freeze_mlp(self.value_network)
+            return FusedValue(mlp) if fused_mlp_ok(mlp, state_dim) else None
+
+        return self._planning_views.get(self.value_network, state_dim, build)

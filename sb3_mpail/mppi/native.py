@@ -202,6 +202,7 @@ class NativeMlp:
         self._biases = (ctypes.c_void_p * n_layers)(*[bias.data_ptr() for bias in biases], None)
         self._activations = (ctypes.c_int * n_layers)(*activation_codes)
         self._slopes = (ctypes.c_float * n_layers)(*slopes)
+        self._held_parts: dict = {}  # per (held dims, pairs, state_dim): the inputs read and the held weight
         self._mlp = _Mlp(
             n_layers,
             ctypes.addressof(self._widths),
@@ -257,16 +258,20 @@ class NativeMlp:
         dims = sorted(set(held_dims))
         if dims and not 0 <= dims[0] <= dims[-1] < state_dim:
             raise ValueError(f"held state dimensions {dims} out of range for {state_dim}-D states")
-        first_weight = self.weights[0]
-        held_weight = first_weight[dims]
-        if pairs:  # s and s' of a transition hold the same values
-            held_weight = held_weight + first_weight[[state_dim + dim for dim in dims]]
+        key = (tuple(dims), pairs, state_dim)
+        if key not in self._held_parts:
+            first_weight = self.weights[0]
+            held_weight = first_weight[dims]
+            if pairs:  # s and s' of a transition hold the same values
+                held_weight = held_weight + first_weight[[state_dim + dim for dim in dims]]
+            held_inputs = set(dims) | ({state_dim + dim for dim in dims} if pairs else set())
+            read = [index for index in range(self.input_size) if index not in held_inputs]
+            self._held_parts[key] = (ctypes.c_int * len(read))(*read), held_weight
+        read_array, held_weight = self._held_parts[key]
         group_biases = initial_states[:, dims].to(held_weight) @ held_weight
         if len(self.weights) > 1:  # a single layer's bias is the output bias, the caller's
             group_biases += self.biases[0]
-        held_inputs = set(dims) | ({state_dim + dim for dim in dims} if pairs else set())
-        read = [index for index in range(self.input_size) if index not in held_inputs]
-        return HeldInputs((ctypes.c_int * len(read))(*read), group_biases.contiguous(), self.input_size)
+        return HeldInputs(read_array, group_biases.contiguous(), self.input_size)
 
     def marked_up_sums(
         self, states: th.Tensor, markups: th.Tensor, pairs: bool, out: th.Tensor, held: Optional[HeldInputs] = None

@@ -16,7 +16,7 @@ is :func:`sb3_mpail.mppi.reference.reference_plan`; this planner gives the same 
 
 * dynamics models with a batched ``rollout(initial_states, actions)`` roll out all ``H`` steps in one call;
 * the discriminator and value run through their fused planning views (:mod:`sb3_mpail.mppi.fused`), their weights
-  frozen once per planning step, when gradients are off and the networks are in eval mode;
+  frozen until they change, when gradients are off and the networks are in eval mode;
 * optionally the roll-out/cost/weight update is compiled with ``torch.compile`` (``compile_planner``).
 """
 
@@ -86,7 +86,8 @@ def weighted_mean(weights: th.Tensor, actions: th.Tensor) -> th.Tensor:
 class TrajectoryCost:
     """
     ``C_k = sum_t eta^t c(s_t, s_{t+1}) - eta^H V(s_H)`` for one planning step. Step cost and value run through
-    their fused planning views (weights frozen now, at construction) where they offer one, else as plain calls.
+    their fused planning views (weights frozen, see :class:`~sb3_mpail.mppi.fused.ViewCache`) where they offer one, else
+    as plain calls.
 
     :param step_cost: ``c(s, s')`` over any leading shape, or ``None`` (value-only)
     :param terminal_value: ``V(s)`` over any leading shape, or ``None`` (cost-only)
@@ -119,7 +120,7 @@ class TrajectoryCost:
         self.fused_step_cost = _planning_view(step_cost, state_dim) if fused else None
         self.fused_value = _planning_view(terminal_value, state_dim) if fused else None
         for view in (self.fused_step_cost, self.fused_value):
-            if held_dims and hasattr(view, "hold"):
+            if hasattr(view, "hold"):  # views outlive a planning step (see fused.ViewCache): always set, even to none
                 view.hold(held_dims, states)
 
     def __call__(self, states: th.Tensor) -> th.Tensor:
@@ -207,7 +208,7 @@ class MPPIPlanner(nn.Module):
         return self.neutral_action.expand(n_envs, self.horizon, -1).clone()
 
     def trajectory_cost(self, states: th.Tensor, horizon: int) -> TrajectoryCost:
-        """The trajectory cost of this planning step, networks frozen now (fused views only when not compiling)."""
+        """The trajectory cost of this planning step, networks frozen (fused views only when not compiling)."""
         return TrajectoryCost(
             self.step_cost if self.use_step_cost else None,
             self.terminal_value if self.use_terminal_value else None,
