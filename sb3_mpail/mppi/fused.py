@@ -110,6 +110,7 @@ class ViewCache(Generic[View]):
     def __init__(self) -> None:
         self._key: Optional[tuple] = None
         self._view: Optional[View] = None
+        self._tensors: List[th.Tensor] = []
 
     def get(self, network: nn.Module, state_dim: int, build: Callable[[], Optional[View]]) -> Optional[View]:
         """
@@ -118,15 +119,16 @@ class ViewCache(Generic[View]):
         :param build: builds the view (``None``: the network has none)
         :return: the cached view, built anew if the network changed since
         """
-        tensors = chain(network.parameters(), network.buffers())
+        tensors = list(chain(network.parameters(), network.buffers()))
         # Tensor._version counts in-place changes; autograd relies on it the same way
         key = (state_dim, *((id(tensor), tensor.data_ptr(), tensor._version) for tensor in tensors))
         if key != self._key:
-            self._view, self._key = build(), key
+            # the tensors are held so that no replacement can take their ids and memory while the key names them
+            self._view, self._key, self._tensors = build(), key, tensors
         return self._view
 
     def __getstate__(self) -> dict:  # rebuilt on demand: the kernel's view holds pointers
-        return {"_key": None, "_view": None}
+        return {"_key": None, "_view": None, "_tensors": []}
 
 
 @dataclass(frozen=True)
