@@ -1,6 +1,6 @@
 /*
  * The planner's MLP costs in one pass per block of rows: every layer of a small MLP for BLOCK rows at once, the
- * activations of a block kept in two L1-sized scratch arrays, so no layer's output ever goes to memory (the torch path
+ * activations of a block kept in L1-sized scratch arrays, so no layer's output ever goes to memory (the torch path
  * writes and re-reads every layer's output, and adds the bias and activation in passes of their own).
  *
  * Rows are vectorised: a block's activations are stored feature by feature, BLOCK rows each, and every multiply-add
@@ -103,11 +103,11 @@ static inline vector activate(vector values, int activation, float slope) {
  * count, so the accumulators stay in registers.
  */
 static inline __attribute__((always_inline)) void dense_units(const struct layer *layer, int j, int count,
-                                                              int indexed, vector *result) {
+                                                              vector *result) {
     /* locals, so the compiler need not reload them after each store to the output */
     const float *input = layer->input, *weight = layer->weight, *bias = layer->bias, *row_bias = layer->row_bias;
     const float *next_weight = layer->next_weight;
-    const int *read = layer->read; /* used when indexed, a constant that specialises the loop */
+    const int *read = layer->read;
     int n_in = layer->n_in, n_out = layer->n_out, activation = layer->activation;
     float slope = layer->slope, *output = layer->output;
     vector sums[GROUP][VECTORS];
@@ -117,7 +117,7 @@ static inline __attribute__((always_inline)) void dense_units(const struct layer
     for (int k = 0; k < n_in; k++) {
         vector rows[VECTORS];
         for (int v = 0; v < VECTORS; v++) rows[v] = load(input + k * BLOCK + v * LANES);
-        const float *weights = weight + (size_t)(indexed ? read[k] : k) * n_out + j;
+        const float *weights = weight + (size_t)(read ? read[k] : k) * n_out + j;
         for (int u = 0; u < count; u++) {
             float w = weights[u];
             for (int v = 0; v < VECTORS; v++) sums[u][v] += w * rows[v];
@@ -135,14 +135,9 @@ static inline __attribute__((always_inline)) void dense_units(const struct layer
 
 /* a whole layer for a block, GROUP output units per pass over its inputs */
 static void dense(const struct layer *layer, vector *result) {
-    int j = 0, indexed = layer->read != NULL;
-    if (indexed) {
-        for (; j + GROUP <= layer->n_out; j += GROUP) dense_units(layer, j, GROUP, 1, result);
-        for (; j < layer->n_out; j++) dense_units(layer, j, 1, 1, result);
-    } else {
-        for (; j + GROUP <= layer->n_out; j += GROUP) dense_units(layer, j, GROUP, 0, result);
-        for (; j < layer->n_out; j++) dense_units(layer, j, 1, 0, result);
-    }
+    int j = 0;
+    for (; j + GROUP <= layer->n_out; j += GROUP) dense_units(layer, j, GROUP, result);
+    for (; j < layer->n_out; j++) dense_units(layer, j, 1, result);
 }
 
 int mlp_max_width(void) { return MAX_WIDTH; }

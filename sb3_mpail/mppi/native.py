@@ -251,10 +251,10 @@ class NativeMlp:
         :param held_dims: the state dimensions held
         :param initial_states: ``(n_envs, state_dim)``, CPU float32
         :param pairs: whether the MLP's input is a transition ``[s, s']`` (both halves then hold)
+        :return: what :meth:`marked_up_sums` takes as ``held``
         """
         state_dim = initial_states.shape[-1]
-        if (2 if pairs else 1) * state_dim != self.input_size:
-            raise ValueError(f"the MLP takes {self.input_size} inputs, not {'2 x ' if pairs else ''}{state_dim}")
+        self._check_input_size(state_dim, pairs)
         dims = sorted(set(held_dims))
         if dims and not 0 <= dims[0] <= dims[-1] < state_dim:
             raise ValueError(f"held state dimensions {dims} out of range for {state_dim}-D states")
@@ -292,8 +292,7 @@ class NativeMlp:
         n_states, columns, state_dim = states.shape
         steps = n_states - 1 if pairs else n_states
         # the kernel reads and writes raw memory: anything else than these shapes and types would go out of bounds
-        if (2 if pairs else 1) * state_dim != self.input_size:
-            raise ValueError(f"the MLP takes {self.input_size} inputs, not {'2 x ' if pairs else ''}{state_dim}")
+        self._check_input_size(state_dim, pairs)
         if markups.shape != (steps,) or out.shape != (columns,) or not out.is_contiguous():
             raise ValueError(f"expected {steps} markups and a contiguous output of {columns} columns")
         if any(tensor.dtype != th.float32 or tensor.device.type != "cpu" for tensor in (states, markups, out)):
@@ -316,3 +315,7 @@ class NativeMlp:
         threads = th.get_num_threads()
         self.library.mlp_costs(ctypes.byref(inputs), ctypes.byref(self._mlp), markups.data_ptr(), out.data_ptr(), threads)
         return out
+
+    def _check_input_size(self, state_dim: int, pairs: bool) -> None:
+        if (2 if pairs else 1) * state_dim != self.input_size:
+            raise ValueError(f"the MLP takes {self.input_size} inputs, not {'2 x ' if pairs else ''}{state_dim}")
