@@ -202,7 +202,7 @@ class NativeMlp:
         self._biases = (ctypes.c_void_p * n_layers)(*[bias.data_ptr() for bias in biases], None)
         self._activations = (ctypes.c_int * n_layers)(*activation_codes)
         self._slopes = (ctypes.c_float * n_layers)(*slopes)
-        self._held_parts: dict = {}  # per (held dims, pairs, state_dim): the inputs read and the held weight
+        self._held_parts: dict = {}  # per (held dims, pairs): the inputs read and the held weight
         self._mlp = _Mlp(
             n_layers,
             ctypes.addressof(self._widths),
@@ -258,7 +258,7 @@ class NativeMlp:
         dims = sorted(set(held_dims))
         if dims and not 0 <= dims[0] <= dims[-1] < state_dim:
             raise ValueError(f"held state dimensions {dims} out of range for {state_dim}-D states")
-        key = (tuple(dims), pairs, state_dim)
+        key = (tuple(dims), pairs)  # the state size follows from pairs (checked above)
         if key not in self._held_parts:
             first_weight = self.weights[0]
             held_weight = first_weight[dims]
