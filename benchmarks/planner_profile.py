@@ -9,7 +9,7 @@ Usage::
 """
 
 import argparse
-from typing import List, Optional
+from typing import Callable, List, Optional
 
 import torch as th
 from torch.profiler import ProfilerActivity, profile
@@ -18,15 +18,19 @@ from benchmarks.planner_speed import IMPLEMENTATIONS, planning_step_sb3_mpail
 from sb3_mpail.mppi.native import NativeMlp
 
 
-def name_the_kernel_in_profiles() -> None:
-    """The compiled kernel is not a torch operator: a record_function around its calls gives it a row of its own."""
-    marked_up_sums = NativeMlp.marked_up_sums
+def name_the_kernels_in_profiles() -> None:
+    """The compiled kernels are not torch operators: a record_function around their calls gives each a row of its own."""
+    from sb3_mpail.mppi import sampling
 
-    def recorded(*args, **kwargs):
-        with th.profiler.record_function("sb3_mpail::mlp_costs (compiled kernel)"):
-            return marked_up_sums(*args, **kwargs)
+    def recorded(function: Callable, name: str) -> Callable:
+        def call(*args, **kwargs):
+            with th.profiler.record_function(name):
+                return function(*args, **kwargs)
 
-    NativeMlp.marked_up_sums = recorded
+        return call
+
+    NativeMlp.marked_up_sums = recorded(NativeMlp.marked_up_sums, "sb3_mpail::mlp_costs (compiled kernel)")
+    sampling.standard_normal = recorded(sampling.standard_normal, "sb3_mpail::standard_normal (noise kernel or randn)")
 
 
 def main(argv: Optional[List[str]] = None) -> None:
@@ -38,7 +42,7 @@ def main(argv: Optional[List[str]] = None) -> None:
     parser.add_argument("--rows", type=int, default=25, help="operators shown")
     args = parser.parse_args(argv)
     th.set_num_threads(args.threads)
-    name_the_kernel_in_profiles()
+    name_the_kernels_in_profiles()
     step = planning_step_sb3_mpail(args.envs, "cpu", args.implementation)
     for _ in range(3):
         step()

@@ -1,21 +1,24 @@
 """
-The planner's CPU kernel: a small MLP's cost over many rows in one pass (``mlp_cost.c`` beside this module).
+The planner's CPU kernels, in C beside this module:
 
-The torch path of :mod:`sb3_mpail.mppi.fused` runs each layer as a matrix product over a chunk of rows and then adds
-the bias and activation in passes of their own, so every layer's output goes to memory and back. The kernel instead
-runs every layer for a block of rows while it is in the L1 cache and sums the marked-up outputs over the horizon
-(``BENCHMARKS.md``, "planner_speed", times the planner with and without it).
+- ``mlp_cost.c``: a small MLP's cost over many rows in one pass. The torch path of :mod:`sb3_mpail.mppi.fused` runs
+  each layer as a matrix product over a chunk of rows and then adds the bias and activation in passes of their own, so
+  every layer's output goes to memory and back. The kernel instead runs every layer for a block of rows while it is in
+  the L1 cache and sums the marked-up outputs over the horizon (``BENCHMARKS.md``, "planner_speed", times the planner
+  with and without it).
+- ``normal_noise.c``: ``torch.randn``'s CPU float32 numbers, the same bit for bit, drawn about 6 times faster
+  (:func:`standard_normal`): torch draws each uniform through a function call on one thread.
 
-It is compiled at first use with the machine's C compiler (``$CC``, else ``cc``, ``gcc`` or ``clang``) for the
-machine's own instruction set and linked to the GNU OpenMP runtime torch has loaded, so its threads are torch's
+They are compiled at first use with the machine's C compiler (``$CC``, else ``cc``, ``gcc`` or ``clang``) for the
+machine's own instruction set and linked to the GNU OpenMP runtime torch has loaded, so their threads are torch's
 (as many as ``torch.get_num_threads()``). The library is cached under ``$SB3_MPAIL_CACHE`` (default
 ``~/.cache/sb3_mpail``), one file per source, compiler, OpenMP runtime and CPU. Without a compiler or that runtime
 (torch builds for macOS use another), or with ``SB3_MPAIL_NATIVE=0``, the planner keeps the torch path (a warning
-says why, once); the two agree to float rounding.
+says why, once); the two agree to float rounding, and draw the same noise.
 """
-
 import ctypes
 import hashlib
+import math
 import os
 import platform
 import shutil
@@ -25,11 +28,16 @@ import warnings
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
-from typing import List, Optional, Sequence
+from typing import Callable, List, Optional, Sequence, Tuple
 
 import torch as th
 
-SOURCE = Path(__file__).with_name("mlp_cost.c")
+#: the kernels' sources, each with the flags it needs beyond ``COMPILER_FLAGS``
+SOURCES = {
+    Path(__file__).with_name("mlp_cost.c"): (),
+    # torch's noise bit for bit: fused multiply-adds only where the source writes them, as torch's build has them
+    Path(__file__).with_name("normal_noise.c"): ("-ffp-contract=off",),
+}
 COMPILER_FLAGS = ("-O3", "-march=native", "-fno-strict-aliasing", "-fPIC", "-fopenmp")
 #: activation codes of ``mlp_cost.c``, by the fused paths' oneDNN names
 ACTIVATION_CODES = {"relu": 1, "leaky_relu": 2, "tanh": 3}
@@ -78,22 +86,26 @@ def _cache_directory() -> Path:
 
 
 def _build(compiler: str) -> Path:
-    """Compiles the kernel unless the cache has it; the library appears whole or not at all (an atomic rename)."""
+    """Compiles the kernels unless the cache has them; the library appears whole or not at all (an atomic rename)."""
     openmp = _openmp_runtime()
-    text = [compiler, *COMPILER_FLAGS, str(openmp), _cpu_description()]
-    key = hashlib.sha256(b"\0".join([SOURCE.read_bytes(), *(part.encode() for part in text)]))
+    source_flags = [flag for flags in SOURCES.values() for flag in flags]
+    text = [compiler, *COMPILER_FLAGS, *source_flags, str(openmp), _cpu_description()]
+    key = hashlib.sha256(b"\0".join([*(source.read_bytes() for source in SOURCES), *(part.encode() for part in text)]))
     directory = _cache_directory()
-    library = directory / f"mlp_cost-{key.hexdigest()[:16]}.so"
+    library = directory / f"mppi_kernels-{key.hexdigest()[:16]}.so"
     if library.exists():
         return library
     directory.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=directory) as build_directory:
-        built, objects = Path(build_directory) / library.name, Path(build_directory) / "mlp_cost.o"
+        built = Path(build_directory) / library.name
+        objects = {source: Path(build_directory) / source.with_suffix(".o").name for source in SOURCES}
+        compile_commands = [
+            [compiler, *COMPILER_FLAGS, *flags, "-c", str(source), "-o", str(objects[source])]
+            for source, flags in SOURCES.items()
+        ]
         # linked to torch's OpenMP file itself (not -fopenmp's -lgomp, which may name another copy of the runtime)
-        for command in (
-            [compiler, *COMPILER_FLAGS, "-c", str(SOURCE), "-o", str(objects)],
-            [compiler, "-shared", str(objects), str(openmp), "-lm", "-o", str(built)],
-        ):
+        link_command = [compiler, "-shared", *map(str, objects.values()), str(openmp), "-lm", "-o", str(built)]
+        for command in (*compile_commands, link_command):
             result = subprocess.run(command, capture_output=True, text=True, timeout=120)
             if result.returncode != 0:
                 raise RuntimeError(f"{' '.join(command)} failed: {result.stderr.strip()[-2000:]}")
@@ -122,6 +134,9 @@ def load_library() -> Optional[ctypes.CDLL]:
     library.mlp_costs.restype = None
     pointer = ctypes.c_void_p
     library.mlp_costs.argtypes = [ctypes.POINTER(_Inputs), ctypes.POINTER(_Mlp), pointer, pointer, ctypes.c_int]
+    if hasattr(library, "standard_normal_fill"):  # built for CPUs with AVX2 and FMA only
+        library.standard_normal_fill.restype = None
+        library.standard_normal_fill.argtypes = [pointer, pointer, ctypes.c_long, ctypes.c_int]
     return library
 
 
@@ -319,3 +334,58 @@ class NativeMlp:
     def _check_input_size(self, state_dim: int, pairs: bool) -> None:
         if (2 if pairs else 1) * state_dim != self.input_size:
             raise ValueError(f"the MLP takes {self.input_size} inputs, not {'2 x ' if pairs else ''}{state_dim}")
+
+
+#: bytes of torch's CPU generator state (``CPUGeneratorImplState``), whose head ``normal_noise.c`` reads and advances
+_GENERATOR_STATE_BYTES = 5056
+#: sizes the noise kernel is checked at before first use: one block, a tail of 7, and 2^20 + 3 across many twists
+_CHECKED_SIZES = (16, 1007, 2**20 + 3)
+
+
+def standard_normal(
+    shape: Tuple[int, ...], generator: Optional[th.Generator], device: th.device, dtype: th.dtype
+) -> th.Tensor:
+    """
+    ``torch.randn(shape, generator=generator, device=device, dtype=dtype)``: the same numbers, and the generator left in
+    the same state, drawn by ``normal_noise.c`` for CPU float32 where it reproduces torch's (:func:`_normal_fill`).
+    Like ``torch.randn``, it must not share a generator with another thread drawing at the same time.
+    """
+    fill = _normal_fill() if th.device(device).type == "cpu" and dtype == th.float32 and math.prod(shape) >= 16 else None
+    generator = th.default_generator if generator is None else generator
+    if fill is None or generator.device.type != "cpu":
+        return th.randn(shape, generator=generator, device=device, dtype=dtype)
+    state = generator.get_state()
+    if state.numel() != _GENERATOR_STATE_BYTES:
+        return th.randn(shape, generator=generator, device=device, dtype=dtype)
+    out = th.empty(shape, dtype=th.float32)
+    fill(state.data_ptr(), out.data_ptr(), out.numel(), th.get_num_threads())
+    generator.set_state(state)
+    return out
+
+
+@cache
+def _normal_fill() -> Optional[Callable[[int, int, int, int], None]]:
+    """
+    The kernel's ``standard_normal_fill``, where it draws ``torch.randn``'s numbers: built for AVX2 and FMA, torch
+    taking its AVX2 normal kernel (CPU capability AVX2 or AVX512: torch keeps the AVX2 one there too), torch's
+    generator state of the layout the kernel reads, and the same numbers and final state as torch at
+    ``_CHECKED_SIZES`` from a generator part-way through its words. Else ``None``, with a warning if the draws differ.
+    """
+    library = load_library()
+    if library is None or not hasattr(library, "standard_normal_fill"):
+        return None
+    if th.backends.cpu.get_cpu_capability() not in ("AVX2", "AVX512"):
+        return None
+    generator = th.Generator().manual_seed(20261201)
+    th.randn(5, generator=generator)  # below 16 numbers torch takes another path, which caches a spare normal
+    if generator.get_state().numel() != _GENERATOR_STATE_BYTES:
+        return None
+    for size in _CHECKED_SIZES:
+        state = generator.get_state()
+        drawn = th.empty(size)
+        library.standard_normal_fill(state.data_ptr(), drawn.data_ptr(), size, th.get_num_threads())
+        expected = th.randn(size, generator=generator)
+        if not (th.equal(drawn.view(th.int32), expected.view(th.int32)) and th.equal(state, generator.get_state())):
+            warnings.warn("sb3_mpail: the noise kernel does not reproduce torch.randn here; using torch.randn", stacklevel=2)
+            return None
+    return library.standard_normal_fill
