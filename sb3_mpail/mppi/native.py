@@ -6,8 +6,8 @@ The planner's CPU kernels, in C beside this module:
   every layer's output goes to memory and back. The kernel instead runs every layer for a block of rows while it is in
   the L1 cache and sums the marked-up outputs over the horizon (``BENCHMARKS.md``, "planner_speed", times the planner
   with and without it).
-- ``normal_noise.c``: ``torch.randn``'s CPU float32 numbers, the same bit for bit, drawn about 6 times faster
-  (:func:`standard_normal`): torch draws each uniform through a function call on one thread.
+- ``normal_noise.c``: ``torch.randn``'s CPU float32 numbers, the same bit for bit, drawn 4 to 6 times faster (1 and 2
+  threads; :func:`standard_normal`): torch draws each uniform through a function call on one thread.
 
 They are compiled at first use with the machine's C compiler (``$CC``, else ``cc``, ``gcc`` or ``clang``) for the
 machine's own instruction set and linked to the GNU OpenMP runtime torch has loaded, so their threads are torch's
@@ -348,7 +348,7 @@ def standard_normal(
     """
     ``torch.randn(shape, generator=generator, device=device, dtype=dtype)``: the same numbers, and the generator left in
     the same state, drawn by ``normal_noise.c`` for CPU float32 where it reproduces torch's (:func:`_normal_fill`).
-    Like ``torch.randn``, it must not share a generator with another thread drawing at the same time.
+    Unlike ``torch.randn`` it does not lock the generator: another thread drawing from it meanwhile may repeat its draws.
     """
     fill = _normal_fill() if th.device(device).type == "cpu" and dtype == th.float32 and math.prod(shape) >= 16 else None
     generator = th.default_generator if generator is None else generator
