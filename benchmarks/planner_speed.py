@@ -212,6 +212,7 @@ def cases(args: argparse.Namespace) -> List[tuple]:
         implementations += ["blas"] if device == "cpu" and th.backends.mkldnn.is_available() else []
         implementations += ["compiled"] if args.compile else []
         implementations += ["cuda-graphs"] if device == "cuda" else []
+        implementations = [name for name in implementations if args.implementations is None or name in args.implementations]
         for threads in args.threads if device == "cpu" else args.threads[:1]:
             for n_envs in args.envs:
                 for implementation in implementations:
@@ -275,6 +276,9 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     parser.add_argument("--min-seconds", type=float, default=2.0, help="time each case for at least this long")
     parser.add_argument("--rounds", type=int, default=2, help="time every case this many times; the fastest is reported")
     parser.add_argument("--compile", action="store_true", help="also time compile_planner=True")
+    parser.add_argument(
+        "--implementations", nargs="+", choices=tuple(IMPLEMENTATIONS), help="time only these (default: all that apply)"
+    )
     parser.add_argument("--no-pytorch-mppi", action="store_true")
     parser.add_argument(
         "--max-baseline-envs", type=int, default=64, help="time the reference and pytorch_mppi only up to this many envs"
