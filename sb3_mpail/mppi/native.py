@@ -351,15 +351,13 @@ def standard_normal(
     Unlike ``torch.randn`` it does not lock the generator: another thread drawing from it meanwhile may repeat its draws.
     """
     fill = _normal_fill() if th.device(device).type == "cpu" and dtype == th.float32 and math.prod(shape) >= 16 else None
-    generator = th.default_generator if generator is None else generator
-    if fill is None or generator.device.type != "cpu":
-        return th.randn(shape, generator=generator, device=device, dtype=dtype)
-    state = generator.get_state()
-    if state.numel() != _GENERATOR_STATE_BYTES:
+    source = th.default_generator if generator is None else generator
+    state = source.get_state() if fill is not None and source.device.type == "cpu" else None
+    if state is None or state.numel() != _GENERATOR_STATE_BYTES:
         return th.randn(shape, generator=generator, device=device, dtype=dtype)
     out = th.empty(shape, dtype=th.float32)
     fill(state.data_ptr(), out.data_ptr(), out.numel(), th.get_num_threads())
-    generator.set_state(state)
+    source.set_state(state)
     return out
 
 

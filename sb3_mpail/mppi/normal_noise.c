@@ -169,8 +169,9 @@ void standard_normal_fill(struct torch_generator_state *state, float *out, long 
     if (size % BOX_MULLER_BLOCK != 0)
         draw_uniforms(&twister, tail, BOX_MULLER_BLOCK);
     long blocks = size / BOX_MULLER_BLOCK;
-    int threads = blocks / MIN_BLOCKS_PER_THREAD < max_threads ? (int)(blocks / MIN_BLOCKS_PER_THREAD) : max_threads;
-#pragma omp parallel for num_threads(threads > 1 ? threads : 1) schedule(static)
+    long threads = blocks / MIN_BLOCKS_PER_THREAD;
+    threads = threads < 1 ? 1 : threads > max_threads ? max_threads : threads;
+#pragma omp parallel for num_threads((int)threads) schedule(static)
     for (long block = 0; block < blocks; block++)
         box_muller(out + block * BOX_MULLER_BLOCK);
     if (size % BOX_MULLER_BLOCK != 0) {
