@@ -355,7 +355,7 @@ def standard_normal(
     state = source.get_state() if fill is not None and source.device.type == "cpu" else None
     if state is None or state.numel() != _GENERATOR_STATE_BYTES:
         return th.randn(shape, generator=generator, device=device, dtype=dtype)
-    out = th.empty(shape, dtype=th.float32)
+    out = th.empty(shape, dtype=th.float32, device="cpu")
     fill(state.data_ptr(), out.data_ptr(), out.numel(), th.get_num_threads())
     source.set_state(state)
     return out
@@ -380,9 +380,9 @@ def _normal_fill() -> Optional[Callable[[int, int, int, int], None]]:
         return None
     for size in _CHECKED_SIZES:
         state = generator.get_state()
-        drawn = th.empty(size)
+        drawn = th.empty(size, dtype=th.float32, device="cpu")
         library.standard_normal_fill(state.data_ptr(), drawn.data_ptr(), size, th.get_num_threads())
-        expected = th.randn(size, generator=generator)
+        expected = th.randn(size, generator=generator, dtype=th.float32, device="cpu")
         if not (th.equal(drawn.view(th.int32), expected.view(th.int32)) and th.equal(state, generator.get_state())):
             warnings.warn("sb3_mpail: the noise kernel does not reproduce torch.randn here; using torch.randn", stacklevel=2)
             return None
