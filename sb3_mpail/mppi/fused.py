@@ -210,6 +210,13 @@ def native_mlp(mlp: FrozenMlp) -> Optional[NativeMlp]:
     return NativeMlp.from_layers(mlp.weights, mlp.biases, names, slopes)
 
 
+def _held_inputs(
+    native: Optional[NativeMlp], held_dims: Sequence[int], initial_states: th.Tensor, pairs: bool
+) -> Optional[HeldInputs]:
+    """The kernel's held inputs for ``held_dims`` (``None`` without the kernel or held dimensions: read every input)."""
+    return native.hold(held_dims, initial_states, pairs) if native is not None and held_dims else None
+
+
 def _hidden_layers(mlp: FrozenMlp, hidden: th.Tensor, first_layer: int, last_layer: int, workspace: Workspace) -> th.Tensor:
     """
     Layers ``first_layer .. last_layer - 1`` of ``mlp`` on 2-D ``hidden``: one oneDNN call per layer with bias and
@@ -265,9 +272,7 @@ class FusedTransitionCost:
         moves) at their values in ``initial_states``, ``(n_envs, state_dim)``: the kernel then skips those inputs
         (the torch path ignores this).
         """
-        self._held = None
-        if self.native is not None and held_dims:
-            self._held = self.native.hold(held_dims, initial_states, pairs=True)
+        self._held = _held_inputs(self.native, held_dims, initial_states, pairs=True)
 
     def __call__(self, states: th.Tensor, markups: th.Tensor, workspace: Workspace) -> th.Tensor:
         """
@@ -345,9 +350,7 @@ class FusedValue:
 
     def hold(self, held_dims: Sequence[int], initial_states: th.Tensor) -> None:
         """As :meth:`FusedTransitionCost.hold`: states ``(n_envs, ..., state_dim)`` hold ``held_dims`` per env."""
-        self._held = None
-        if self.native is not None and held_dims:
-            self._held = self.native.hold(held_dims, initial_states, pairs=False)
+        self._held = _held_inputs(self.native, held_dims, initial_states, pairs=False)
 
     def __call__(self, states: th.Tensor, workspace: Workspace) -> th.Tensor:
         """
