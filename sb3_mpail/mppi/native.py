@@ -16,6 +16,7 @@ machine's own instruction set and linked to the GNU OpenMP runtime torch has loa
 (torch builds for macOS use another), or with ``SB3_MPAIL_NATIVE=0``, the planner keeps the torch path (a warning
 says why, once); the two agree to float rounding, and draw the same noise.
 """
+
 import ctypes
 import hashlib
 import math
