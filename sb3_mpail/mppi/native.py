@@ -12,9 +12,9 @@ The planner's CPU kernels, in C beside this module:
 They are compiled at first use with the machine's C compiler (``$CC``, else ``cc``, ``gcc`` or ``clang``) for the
 machine's own instruction set and linked to the GNU OpenMP runtime torch has loaded, so their threads are torch's
 (as many as ``torch.get_num_threads()``). The library is cached under ``$SB3_MPAIL_CACHE`` (default
-``~/.cache/sb3_mpail``), one file per source, compiler, OpenMP runtime and CPU. Without a compiler or that runtime
-(torch builds for macOS use another), or with ``SB3_MPAIL_NATIVE=0``, the planner keeps the torch path (a warning
-says why, once); the two agree to float rounding, and draw the same noise.
+``~/.cache/sb3_mpail``), one file per version of the sources, compiler, flags, OpenMP runtime and CPU. Without a
+compiler or that runtime (torch builds for macOS use another), or with ``SB3_MPAIL_NATIVE=0``, the planner keeps the
+torch path (a warning says why, once); the two agree to float rounding, and draw the same noise.
 """
 
 import ctypes
