@@ -60,6 +60,31 @@ def _episodes_from_npz(path: Path) -> List[np.ndarray]:
     return list(observations)
 
 
+def load_demo_episodes(demos: DemoSource) -> List[np.ndarray]:
+    """
+    The demos' episodes as observation arrays, ``(T_i + 1, obs_dim)`` each.
+
+    :param demos: trajectories, an ``.npz`` path or an imitation ``serialize`` directory (not ``Transitions``, which
+        hold no episode boundaries)
+    :raises FileNotFoundError: the path does not exist
+    """
+    if isinstance(demos, (str, os.PathLike)):
+        path = Path(demos)
+        if not path.exists():
+            raise FileNotFoundError(f"Demo path {path} does not exist.")
+        if path.is_dir():
+            from imitation.data import serialize
+
+            return [trajectory.obs for trajectory in serialize.load(path)]
+        return _episodes_from_npz(path)
+    if isinstance(demos, Sequence) and len(demos) > 0 and all(isinstance(item, Trajectory) for item in demos):
+        return [trajectory.obs for trajectory in demos]
+    raise TypeError(
+        "demos must be a sequence of imitation Trajectory objects, imitation Transitions, an .npz file or a "
+        f"directory saved by imitation.data.serialize; got {type(demos).__name__}."
+    )
+
+
 def load_demos(
     demos: DemoSource, observation_space: spaces.Box, space_name: str = "the environment's observation space"
 ) -> ExpertTransitions:
@@ -73,25 +98,10 @@ def load_demos(
     :raises FileNotFoundError: the path does not exist
     :raises ValueError: shapes differ from the observation space, values are not finite, or the data is empty
     """
-    if isinstance(demos, (str, os.PathLike)):
-        path = Path(demos)
-        if not path.exists():
-            raise FileNotFoundError(f"Demo path {path} does not exist.")
-        if path.is_dir():
-            from imitation.data import serialize
-
-            transitions = _pairs_from_episodes([trajectory.obs for trajectory in serialize.load(path)])
-        else:
-            transitions = _pairs_from_episodes(_episodes_from_npz(path))
-    elif isinstance(demos, Transitions):
+    if isinstance(demos, Transitions):
         transitions = ExpertTransitions(np.asarray(demos.obs, np.float32), np.asarray(demos.next_obs, np.float32))
-    elif isinstance(demos, Sequence) and len(demos) > 0 and all(isinstance(item, Trajectory) for item in demos):
-        transitions = _pairs_from_episodes([trajectory.obs for trajectory in demos])
     else:
-        raise TypeError(
-            "demos must be a sequence of imitation Trajectory objects, imitation Transitions, an .npz file or a "
-            f"directory saved by imitation.data.serialize; got {type(demos).__name__}."
-        )
+        transitions = _pairs_from_episodes(load_demo_episodes(demos))
     expected = tuple(observation_space.shape)
     if transitions.observations.shape[1:] != expected:
         raise ValueError(

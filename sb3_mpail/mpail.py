@@ -11,6 +11,7 @@ from typing import Any, ClassVar, Dict, Iterable, List, Tuple, Type, TypeVar, Un
 import numpy as np
 import torch as th
 from gymnasium import spaces
+from imitation.data.buffer import Buffer
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import BasePolicy
@@ -54,6 +55,9 @@ class MPAIL(BaseAlgorithm):
     :param discriminator_betas: Adam betas of the discriminator
     :param discriminator_l2: weight decay of the discriminator (paper: 0 in simulation, 1e-3 on real data)
     :param discriminator_update_interval: iterations between discriminator updates (paper's 3:1 value:disc ratio)
+    :param discriminator_replay_size: agent transitions of earlier rollouts kept for the discriminator (imitation's FIFO
+        ``Buffer``); each discriminator minibatch adds as many of them as it has of the current rollout, so behaviour
+        the agent has left behind stays agent-like. ``0``: the current rollout only (the paper's)
     :param value_learning_rate: Adam learning rate of the value
     :param value_betas: Adam betas of the value
     :param value_clip: clip range of the value loss around the values at collection time
@@ -90,6 +94,7 @@ class MPAIL(BaseAlgorithm):
         discriminator_betas: Tuple[float, float] = (0.5, 0.999),
         discriminator_l2: float = 0.0,
         discriminator_update_interval: int = 3,
+        discriminator_replay_size: int = 0,
         value_learning_rate: float = 1e-3,
         value_betas: Tuple[float, float] = (0.9, 0.999),
         value_clip: float = 0.2,
@@ -127,6 +132,8 @@ class MPAIL(BaseAlgorithm):
         self.discriminator_betas = discriminator_betas
         self.discriminator_l2 = discriminator_l2
         self.discriminator_update_interval = discriminator_update_interval
+        self.discriminator_replay_size = discriminator_replay_size
+        self.discriminator_replay: Buffer | None = None
         self.value_learning_rate = value_learning_rate
         self.value_betas = value_betas
         self.value_clip = value_clip
@@ -214,7 +221,7 @@ class MPAIL(BaseAlgorithm):
         return max(self.initial_temperature * (1 - self.temperature_decay) ** episodes_per_env, self.min_temperature)
 
     def _excluded_save_params(self) -> List[str]:
-        return [*super()._excluded_save_params(), "expert", "_plan"]
+        return [*super()._excluded_save_params(), "expert", "_plan", "discriminator_replay"]
 
     def _get_torch_save_params(self) -> Tuple[List[str], List[str]]:
         state_dicts = ["policy", "discriminator_optimizer", "value_optimizer"]
@@ -383,11 +390,18 @@ class MPAIL(BaseAlgorithm):
         discriminator = self.policy.discriminator
         with th.no_grad():
             agent_features, agent_next_features = self.policy.features(observations), self.policy.features(next_observations)
+        replay = self._replay_buffer(tuple(agent_features.shape[1:]))
+        replay_ready = replay is not None and replay.size() > 0
         losses, expert_accuracies, agent_accuracies = [], [], []
         for _ in range(self.n_epochs):
             for batch in self._minibatches(len(observations)):
-                expert_batch = th.randint(len(expert_observations), (len(batch),), device=self.device)
-                agent_logits = discriminator(agent_features[batch], None, agent_next_features[batch], None)
+                batch_features, batch_next_features = agent_features[batch], agent_next_features[batch]
+                if replay_ready:
+                    replayed = replay.sample(len(batch))
+                    batch_features = th.cat((batch_features, self._tensor(replayed["features"])))
+                    batch_next_features = th.cat((batch_next_features, self._tensor(replayed["next_features"])))
+                expert_batch = th.randint(len(expert_observations), (len(batch_features),), device=self.device)
+                agent_logits = discriminator(batch_features, None, batch_next_features, None)
                 expert_logits = discriminator(
                     expert_observations[expert_batch], None, expert_next_observations[expert_batch], None
                 )
@@ -400,10 +414,24 @@ class MPAIL(BaseAlgorithm):
                 losses.append(loss.item())
                 expert_accuracies.append((expert_logits > 0).float().mean().item())
                 agent_accuracies.append((agent_logits < 0).float().mean().item())
+        if replay is not None:  # stored after the update: every minibatch already holds the current rollout
+            replay.store({"features": agent_features.cpu().numpy(), "next_features": agent_next_features.cpu().numpy()}, True)
         self.logger.record("train/discriminator_loss", np.mean(losses))
         self.logger.record("train/discriminator_accuracy", (np.mean(expert_accuracies) + np.mean(agent_accuracies)) / 2)
         self.logger.record("train/expert_accuracy", np.mean(expert_accuracies))
         self.logger.record("train/agent_accuracy", np.mean(agent_accuracies))
+
+    def _replay_buffer(self, feature_shape: Tuple[int, ...]) -> Buffer | None:
+        """The discriminator's replay of earlier agent rollouts (created on first use), or ``None`` when it is off."""
+        if self.discriminator_replay_size <= 0:
+            return None
+        if self.discriminator_replay is None:
+            self.discriminator_replay = Buffer(
+                self.discriminator_replay_size,
+                sample_shapes={"features": feature_shape, "next_features": feature_shape},
+                dtypes={"features": np.float32, "next_features": np.float32},
+            )
+        return self.discriminator_replay
 
     def _train_value(self, observations: th.Tensor) -> None:
         """Clipped regression of ``V_phi`` onto the GAE returns, as PPO's value loss."""

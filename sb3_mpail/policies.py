@@ -18,7 +18,7 @@ from sb3_mpail.mppi.costs import (
 )
 from sb3_mpail.mppi.dynamics import DynamicsSpec, LearnedDynamics, make_dynamics
 from sb3_mpail.mppi.planner import MPPIPlanner
-from sb3_mpail.mppi.sampling import GaussianSampler
+from sb3_mpail.mppi.sampling import make_sampler
 
 #: the deterministic-planning noise stream is seeded with ``seed + DETERMINISTIC_SEED_OFFSET``
 DETERMINISTIC_SEED_OFFSET = 1_000_003
@@ -52,8 +52,11 @@ class MPPIPolicy(BasePolicy):
         and the value still use the full state. ``None``: the full observation. Its parameters, if any, are saved
         but not trained. Functions are saved with cloudpickle (module-level functions by reference, so their
         module must be importable when loading; lambdas and closures by value)
-    :param sampler: replaces the Gaussian sampler: a module ``sampler(plan, n_samples, generator)`` returning
-        time-major action sequences clamped to the bounds
+    :param sampler: how action sequences are sampled around the plan: ``"gaussian"`` (the paper's, std
+        ``noise_std``), ``"delta"`` (the authors' code: smooth random walks,
+        :class:`~sb3_mpail.mppi.sampling.DeltaSampler`, ``noise_std`` its increments' std) or a module
+        ``sampler(plan, n_samples, generator)`` returning time-major action sequences clamped to the bounds
+    :param sampler_kwargs: keyword arguments of a named sampler (e.g. ``max_delta`` of ``"delta"``)
     :param step_cost: replaces the discriminator cost in the planner: ``c(states, next_states)`` over any leading shape
     :param terminal_value: replaces the learned value in the planner: ``V(states)`` over any leading shape
     :param compile_planner: compile the planner's roll-out/cost/weight update with ``torch.compile``: ``False``
@@ -77,7 +80,8 @@ class MPPIPolicy(BasePolicy):
         value_hidden_sizes: Sequence[int] = (32, 32),
         use_spectral_norm: bool = True,
         discriminator_features: FeatureSpec | None = None,
-        sampler: nn.Module | None = None,
+        sampler: Union[str, nn.Module] = "gaussian",
+        sampler_kwargs: Dict[str, Any] | None = None,
         step_cost: nn.Module | None = None,
         terminal_value: nn.Module | None = None,
         compile_planner: Union[bool, str] = False,
@@ -100,6 +104,7 @@ class MPPIPolicy(BasePolicy):
             use_spectral_norm=use_spectral_norm,
             discriminator_features=discriminator_features,
             sampler=sampler,
+            sampler_kwargs=sampler_kwargs,
             step_cost=step_cost,
             terminal_value=terminal_value,
             compile_planner=compile_planner,
@@ -117,7 +122,7 @@ class MPPIPolicy(BasePolicy):
         low, high = action_space.low.astype(np.float32), action_space.high.astype(np.float32)
         self.planner = MPPIPlanner(
             dynamics=self.dynamics,
-            sampler=sampler if sampler is not None else GaussianSampler(low, high, np.asarray(noise_std, dtype=np.float32)),
+            sampler=make_sampler(sampler, low, high, noise_std, sampler_kwargs),
             step_cost=step_cost if step_cost is not None else TransitionCost(self.discriminator, self.discriminator_features),
             terminal_value=terminal_value if terminal_value is not None else TerminalValue(self.value_net),
             # the paper's zero mean, kept inside the bounds for spaces that exclude 0

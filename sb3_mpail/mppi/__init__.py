@@ -15,12 +15,13 @@ from sb3_mpail.mppi.dynamics import (
 )
 from sb3_mpail.mppi.highway_dynamics import HighwayKinematics, RacetrackKinematics  # also registers them by name
 from sb3_mpail.mppi.planner import MPPIPlanner, PlanResult
-from sb3_mpail.mppi.sampling import GaussianSampler
+from sb3_mpail.mppi.sampling import DeltaSampler, GaussianSampler
 
 __all__ = [
     "DEFAULT_DYNAMICS",
     "DYNAMICS_MODELS",
     "CallableDynamics",
+    "DeltaSampler",
     "GaussianSampler",
     "HighwayKinematics",
     "KinematicBicycle",

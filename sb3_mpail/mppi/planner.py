@@ -231,6 +231,18 @@ class MPPIPlanner(nn.Module):
         :param temperature: ``lambda`` of the exponential weights (scalar tensor)
         :param generator: source of the sampling noise
         """
+        plan, actions, weights = self.optimise(states, previous_plan, temperature, generator)
+        return PlanResult(plan, weighted_action_std(weights, actions, plan))
+
+    def optimise(
+        self, states: th.Tensor, previous_plan: th.Tensor, temperature: th.Tensor, generator: th.Generator
+    ) -> Tuple[th.Tensor, th.Tensor, th.Tensor]:
+        """
+        The ``J`` iterations of one planning step (what :meth:`forward` runs), keeping the last iteration's samples.
+
+        :return: the plan ``(n_envs, horizon, action_dim)``, the last iteration's sampled sequences ``(horizon, n_envs,
+            n_samples, action_dim)`` and their MPPI weights ``(n_envs, n_samples)``
+        """
         plan = shift_plan(previous_plan, self.neutral_action)
         trajectory_cost = self.trajectory_cost(states, plan.shape[1])
         update = self._update
@@ -239,7 +251,7 @@ class MPPIPlanner(nn.Module):
         for _ in range(self.n_iterations):
             actions = self.sampler(plan, self.n_samples, generator)
             plan, weights = update(states, actions, temperature, trajectory_cost)
-        return PlanResult(plan, weighted_action_std(weights, actions, plan))
+        return plan, actions, weights
 
     def _update(
         self, states: th.Tensor, actions: th.Tensor, temperature: th.Tensor, trajectory_cost: TrajectoryCost

@@ -1,7 +1,7 @@
 """Action-sequence samplers for MPPI: perturb the warm-started plan into ``N`` candidate sequences."""
 
 import math
-from typing import Optional, Tuple, Union
+from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import torch as th
@@ -73,3 +73,80 @@ def _sample_rows(samples: th.Tensor) -> Tuple[th.Tensor, int]:
 def _common_value(values: th.Tensor) -> Optional[float]:
     """The value every element of ``values`` shares, or ``None`` if they differ."""
     return float(values[0]) if bool((values == values[0]).all()) else None
+
+
+class DeltaSampler(nn.Module):
+    """
+    Samples smooth action sequences by perturbing the plan's *increments* (the authors' default sampler): with ``P``
+    the plan and ``D_t = P_t - P_{t-1}`` its increments (``D_0 = 0``), each sample is
+    ``u_t = P_0 + sum_{i <= t} clamp(D_i + eps_i, -max_delta, max_delta)``, ``eps ~ N(0, noise_std^2)``, clamped to
+    the action bounds. Every sample is a random walk whose steps are limited to ``max_delta``, so consecutive actions
+    never jump, and with no noise the samples are the plan itself (where its own increments are within the limit).
+
+    ``noise_std`` and ``max_delta`` are relative to the action half-range, like :class:`GaussianSampler`'s std; the
+    authors use ``[1.0, 0.5]`` and ``[0.2, 0.2]`` for the navigation car's ``[speed, steering]``.
+
+    :param action_low: lower action bounds, shape ``(action_dim,)``
+    :param action_high: upper action bounds, shape ``(action_dim,)``
+    :param noise_std: std of the increments' noise relative to the action half-range (scalar or per dimension)
+    :param max_delta: largest change between consecutive actions relative to the half-range (scalar or per dimension)
+    """
+
+    def __init__(
+        self,
+        action_low: np.ndarray,
+        action_high: np.ndarray,
+        noise_std: Union[float, np.ndarray] = (1.0, 0.5),
+        max_delta: Union[float, np.ndarray] = 0.2,
+    ):
+        super().__init__()
+        low = th.as_tensor(np.asarray(action_low, dtype=np.float32))
+        high = th.as_tensor(np.asarray(action_high, dtype=np.float32))
+        half_range = (high - low) / 2
+        std = th.as_tensor(np.asarray(noise_std, dtype=np.float32))
+        delta = th.as_tensor(np.asarray(max_delta, dtype=np.float32))
+        if bool((std < 0).any()) or bool((delta <= 0).any()):
+            raise ValueError(f"DeltaSampler needs noise_std >= 0 and max_delta > 0; got {noise_std} and {max_delta}.")
+        self.register_buffer("action_low", low)
+        self.register_buffer("action_high", high)
+        self.register_buffer("noise_std", std * half_range)
+        self.register_buffer("max_delta", delta * half_range)
+
+    def forward(self, plan: th.Tensor, n_samples: int, generator: th.Generator) -> th.Tensor:
+        """
+        :param plan: sampling mean per env, shape ``(n_envs, horizon, action_dim)``
+        :param n_samples: number of sequences ``N`` per env
+        :param generator: source of the noise, so a seed fixes the samples
+        :return: clamped action sequences, time-major, shape ``(horizon, n_envs, n_samples, action_dim)``
+        """
+        n_envs, horizon, action_dim = plan.shape
+        noise = standard_normal((horizon, n_envs, n_samples, action_dim), generator, plan.device, plan.dtype)
+        increments = th.diff(plan.transpose(0, 1), dim=0, prepend=plan[:, :1].transpose(0, 1)).unsqueeze(2)
+        steps = th.clamp(noise.mul_(self.noise_std).add_(increments), -self.max_delta, self.max_delta)
+        samples = th.cumsum(steps, dim=0).add_(plan[:, 0].unsqueeze(1))
+        return th.clamp(samples, self.action_low, self.action_high)
+
+
+#: the samplers a policy can name
+SAMPLERS = {"gaussian": GaussianSampler, "delta": DeltaSampler}
+
+
+def make_sampler(
+    sampler: Union[str, nn.Module],
+    action_low: np.ndarray,
+    action_high: np.ndarray,
+    noise_std: Union[float, Sequence[float]],
+    sampler_kwargs: Dict[str, Any] | None = None,
+) -> nn.Module:
+    """
+    The planner's sampler: a module as given, or a named one (:data:`SAMPLERS`) built for the action bounds.
+
+    :param sampler: ``"gaussian"``, ``"delta"`` or a module ``sampler(plan, n_samples, generator)``
+    :param noise_std: the named sampler's noise std, relative to the action half-range
+    :param sampler_kwargs: further keyword arguments of a named sampler
+    """
+    if isinstance(sampler, nn.Module):
+        return sampler
+    if sampler not in SAMPLERS:
+        raise ValueError(f"Unknown sampler {sampler!r}: expected one of {sorted(SAMPLERS)} or an nn.Module.")
+    return SAMPLERS[sampler](action_low, action_high, np.asarray(noise_std, dtype=np.float32), **(sampler_kwargs or {}))
