@@ -81,6 +81,12 @@ def _tensor(model, array: np.ndarray) -> th.Tensor:
     return th.as_tensor(np.asarray(array, dtype=np.float32), device=model.policy.device)
 
 
+def _planning_parts(model):
+    """The model's planner in eval mode, as ``predict`` uses it (in training mode spectral norm would move on every call)."""
+    model.policy.set_training_mode(False)
+    return model.policy.planner
+
+
 @th.no_grad()
 def step_cost_field(
     model, template: np.ndarray, action: Sequence[float], xs: np.ndarray, ys: np.ndarray, axes: PlaneAxes = PlaneAxes()
@@ -94,7 +100,7 @@ def step_cost_field(
     :param action: the move, ``(action_dim,)``
     :return: costs ``(ny, nx)``, indexed ``[y, x]``
     """
-    planner = model.policy.planner
+    planner = _planning_parts(model)
     states = _tensor(model, plane_states(template, xs, ys, axes)).view(-1, len(template))
     actions = _tensor(model, action).expand(len(states), -1)
     next_states = planner.dynamics(states, actions)
@@ -110,8 +116,9 @@ def value_field(model, template: np.ndarray, xs: np.ndarray, ys: np.ndarray, axe
     :param template: the state's other dimensions, ``(state_dim,)``
     :return: values ``(ny, nx)``, indexed ``[y, x]``
     """
+    planner = _planning_parts(model)
     states = _tensor(model, plane_states(template, xs, ys, axes)).view(-1, len(template))
-    return model.policy.planner.terminal_value(states).view(len(ys), len(xs)).cpu().numpy()
+    return planner.terminal_value(states).view(len(ys), len(xs)).cpu().numpy()
 
 
 @th.no_grad()
@@ -122,20 +129,24 @@ def decision_field(
     ys: np.ndarray,
     headings: Sequence[float] = (0.0,),
     axes: PlaneAxes = PlaneAxes(),
+    n_steps: int | None = None,
     batch_size: int = 256,
 ) -> np.ndarray:
     """
-    The planner's first move from every grid state: one deterministic planning step from a fresh plan (as at the
-    start of an episode), its first action applied once through the planner's dynamics model.
+    Where the planner means to go from every grid state: one deterministic planning step from a fresh plan (as at
+    the start of an episode), the plan's first ``n_steps`` actions rolled out through the planner's dynamics model.
+    (A car's first step only moves it along its heading; the plan shows where it turns to.)
 
     :param model: a trained (or loaded) :class:`~sb3_mpail.MPAIL` model
     :param template: the state's other dimensions, ``(state_dim,)``
     :param headings: headings to plan from (written at ``axes.heading_index``; with no heading index only one)
+    :param n_steps: plan steps rolled out (``None``: the whole horizon)
     :param batch_size: states planned at once (memory grows with it)
     :return: planar displacements ``(n_headings, ny, nx, 2)``
     """
     if axes.heading_index is None and len(headings) != 1:
         raise ValueError("Several headings need axes.heading_index, the state index they are written at.")
+    planner = _planning_parts(model)
     policy = model.policy
     templates = np.repeat(np.asarray(template, dtype=np.float32)[None], len(headings), axis=0)
     if axes.heading_index is not None:
@@ -145,9 +156,10 @@ def decision_field(
     moves = []
     for batch in np.array_split(states, max(1, math.ceil(len(states) / batch_size))):
         batch_states = _tensor(model, batch)
-        actions, _ = policy.act(batch_states, policy.initial_plan(len(batch)), deterministic=True)
-        moved = policy.planner.dynamics(batch_states, actions)
-        moves.append((moved[:, planar] - batch_states[:, planar]).cpu().numpy())
+        _, plan = policy.act(batch_states, policy.initial_plan(len(batch)), deterministic=True)
+        steps = plan[:, :n_steps].transpose(0, 1).unsqueeze(2)  # time-major, one "sample" per state
+        reached = rollout(planner.dynamics, batch_states, steps)[-1, :, 0]
+        moves.append((reached[:, planar] - batch_states[:, planar]).cpu().numpy())
     return np.concatenate(moves).reshape(len(headings), len(ys), len(xs), 2)
 
 
@@ -188,8 +200,8 @@ def planned_episodes(
     :param env_kwargs: keyword arguments of the env (e.g. ``start_region="ood"``)
     :param every: keep the samples of steps 0, ``every``, ``2 every``, ...
     """
+    planner = _planning_parts(model)
     policy = model.policy
-    planner = policy.planner
     planar = [axes.x_index, axes.y_index]
     env = make_vec_env(env_id, n_envs=n_episodes, seed=seed, env_kwargs=env_kwargs)
     observations = env.reset()
@@ -201,9 +213,9 @@ def planned_episodes(
     step = 0
     while not finished.all():
         states = _tensor(model, observations)
-        plan, actions, weights = planner.optimise(states, plan, policy.temperature, generator)
+        plan, samples, weights, _ = planner.optimise(states, plan, policy.temperature, generator)
         if step % every == 0:
-            visited = rollout(planner.dynamics, states, actions)[..., planar].permute(1, 2, 0, 3).cpu().numpy()
+            visited = rollout(planner.dynamics, states, samples)[..., planar].permute(1, 2, 0, 3).cpu().numpy()
             for index in np.flatnonzero(~finished):
                 episodes[index].sample_steps.append(step)
                 episodes[index].samples.append(visited[index])
@@ -350,7 +362,7 @@ def plot_inspection(
             grid_x, grid_y, unit[..., 0], unit[..., 1], color=colours(index % 10), angles="xy", scale=40, width=0.003,
             label=f"from heading {heading_value:.2f}",
         )
-    arrows.set_title("planner's first move from a fresh plan (unit arrows)")
+    arrows.set_title("where the first plan from each state leads (unit arrows, one colour per start heading)")
     arrows.legend(loc="lower right", fontsize=8)
     episodes_panel = panels[4]
     weight_map = plt.get_cmap("plasma")

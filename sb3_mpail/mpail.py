@@ -27,6 +27,9 @@ from sb3_mpail.policies import MlpMPPI, MPPIPolicy
 
 SelfMPAIL = TypeVar("SelfMPAIL", bound="MPAIL")
 
+#: how the MPPI temperature can move (:class:`MPAIL`'s ``temperature``)
+TEMPERATURES = ("decay", "learned")
+
 
 class MPAIL(BaseAlgorithm):
     """
@@ -62,10 +65,15 @@ class MPAIL(BaseAlgorithm):
     :param value_betas: Adam betas of the value
     :param value_clip: clip range of the value loss around the values at collection time
     :param max_grad_norm: gradient-norm clip of the value update
+    :param temperature: how the MPPI temperature moves: ``"decay"`` (the paper's schedule, ``temperature_decay``) or
+        ``"learned"`` (the authors' code: ``log lambda`` stepped by RMSprop, ``temperature_learning_rate``, after every
+        env step of a rollout, to lower the entropy of the planner's last MPPI weights; floored at
+        ``min_temperature``)
     :param initial_temperature: MPPI temperature ``lambda_0``
     :param temperature_decay: per-episode multiplicative decay: ``lambda = lambda_0 (1 - decay)^episodes``, counting
         episodes per env so the schedule does not depend on ``n_envs``
     :param min_temperature: temperature floor
+    :param temperature_learning_rate: RMSprop learning rate of the learned temperature's logarithm
     :param stats_window_size: episodes averaged in the logged episode return
     :param tensorboard_log: tensorboard log folder
     :param policy_kwargs: keyword arguments of the policy (planner settings, ``dynamics``)
@@ -99,9 +107,11 @@ class MPAIL(BaseAlgorithm):
         value_betas: Tuple[float, float] = (0.9, 0.999),
         value_clip: float = 0.2,
         max_grad_norm: float = 1.0,
+        temperature: str = "decay",
         initial_temperature: float = 1.0,
         temperature_decay: float = 0.01,
         min_temperature: float = 1e-5,
+        temperature_learning_rate: float = 1e-4,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         policy_kwargs: Dict[str, Any] | None = None,
@@ -138,9 +148,13 @@ class MPAIL(BaseAlgorithm):
         self.value_betas = value_betas
         self.value_clip = value_clip
         self.max_grad_norm = max_grad_norm
+        if temperature not in TEMPERATURES:
+            raise ValueError(f"temperature must be one of {TEMPERATURES}; got {temperature!r}.")
+        self.temperature_mode = temperature
         self.initial_temperature = initial_temperature
         self.temperature_decay = temperature_decay
         self.min_temperature = min_temperature
+        self.temperature_learning_rate = temperature_learning_rate
         self.episodes_completed = 0
         self.n_iterations = 0
         self.expert: ExpertTransitions | None = None
@@ -179,6 +193,8 @@ class MPAIL(BaseAlgorithm):
         self.policy = self.policy_class(self.observation_space, self.action_space, **self.policy_kwargs)
         self.policy = self.policy.to(self.device)
         self.policy.seed(self.seed)
+        self.log_temperature = th.nn.Parameter(th.tensor(math.log(self.initial_temperature), device=self.device))
+        self.temperature_optimizer = th.optim.RMSprop([self.log_temperature], lr=self.temperature_learning_rate)
         self.policy.temperature.fill_(self.temperature())
         self.discriminator_optimizer = th.optim.Adam(
             self.policy.discriminator.parameters(),
@@ -216,7 +232,9 @@ class MPAIL(BaseAlgorithm):
         return th.as_tensor(array, dtype=th.float32, device=self.device)
 
     def temperature(self) -> float:
-        """The MPPI temperature after the episodes completed so far."""
+        """The MPPI temperature now: the learned one, or the schedule's after the episodes completed so far."""
+        if self.temperature_mode == "learned":
+            return max(math.exp(self.log_temperature.item()), self.min_temperature)
         episodes_per_env = self.episodes_completed / max(self.n_envs, 1)
         return max(self.initial_temperature * (1 - self.temperature_decay) ** episodes_per_env, self.min_temperature)
 
@@ -227,6 +245,8 @@ class MPAIL(BaseAlgorithm):
         state_dicts = ["policy", "discriminator_optimizer", "value_optimizer"]
         if isinstance(self.policy.dynamics, LearnedDynamics):
             state_dicts.append("policy.dynamics.optimizer")
+        if self.temperature_mode == "learned":
+            return [*state_dicts, "temperature_optimizer"], ["log_temperature"]
         return state_dicts, []
 
     def save(
@@ -313,7 +333,9 @@ class MPAIL(BaseAlgorithm):
             fresh = th.as_tensor(self._last_episode_starts, device=self.device).view(-1, 1, 1)
             self._plan = th.where(fresh, self.policy.initial_plan(env.num_envs), self._plan)
             with th.no_grad():
-                actions, self._plan = self.policy.act(self._tensor(self._last_obs), self._plan)
+                actions, self._plan, costs = self.policy.plan_actions(self._tensor(self._last_obs), self._plan)
+            if self.temperature_mode == "learned":
+                self._learn_temperature(costs)
             actions = actions.cpu().numpy()
             new_obs, _, dones, infos = env.step(actions)
             self.num_timesteps += env.num_envs
@@ -328,13 +350,26 @@ class MPAIL(BaseAlgorithm):
                 timeouts[index] = infos[index].get("TimeLimit.truncated", False)
             self.rollout_buffer.add_transition(self._last_obs, actions, next_obs, self._last_episode_starts, timeouts)
             self.episodes_completed += int(dones.sum())
-            self.policy.temperature.fill_(self.temperature())
+            if self.temperature_mode == "decay":
+                self.policy.temperature.fill_(self.temperature())
             self._last_obs = new_obs
             self._last_episode_starts = dones
         self._label_rollout(new_obs, dones)
         callback.update_locals(locals())
         callback.on_rollout_end()
         return True
+
+    def _learn_temperature(self, costs: th.Tensor) -> None:
+        """One RMSprop step on ``log lambda`` lowering the mean entropy of ``softmax(-costs / lambda)`` over the envs."""
+        floor = math.log(self.min_temperature)
+        log_weights = th.log_softmax(-costs / self.log_temperature.clamp(min=floor).exp(), dim=-1)
+        entropy = -(log_weights.exp() * log_weights).sum(-1).mean()
+        self.temperature_optimizer.zero_grad()
+        entropy.backward()
+        self.temperature_optimizer.step()
+        with th.no_grad():
+            self.log_temperature.clamp_(min=floor)
+            self.policy.temperature.copy_(self.log_temperature.exp())
 
     def _label_rollout(self, last_obs: np.ndarray, dones: np.ndarray) -> None:
         """Learned rewards ``d_theta(s, s')``, values and GAE returns for the whole rollout in a few batched calls."""

@@ -17,7 +17,7 @@ from sb3_mpail.mppi.costs import (
     make_value_network,
 )
 from sb3_mpail.mppi.dynamics import DynamicsSpec, LearnedDynamics, make_dynamics
-from sb3_mpail.mppi.planner import MPPIPlanner
+from sb3_mpail.mppi.planner import MPPIPlanner, weighted_action_std
 from sb3_mpail.mppi.sampling import make_sampler
 
 #: the deterministic-planning noise stream is seeded with ``seed + DETERMINISTIC_SEED_OFFSET``
@@ -190,13 +190,26 @@ class MPPIPolicy(BasePolicy):
         :param previous_plan: ``(n_envs, horizon, action_dim)``
         :return: actions ``(n_envs, action_dim)`` and the new plan
         """
+        actions, plan, _ = self.plan_actions(observations, previous_plan, deterministic)
+        return actions, plan
+
+    def plan_actions(
+        self, observations: th.Tensor, previous_plan: th.Tensor, deterministic: bool = False
+    ) -> Tuple[th.Tensor, th.Tensor, th.Tensor]:
+        """
+        :meth:`act`, also returning the trajectory costs of the planner's last iteration ``(n_envs, n_samples)`` (what
+        a learned temperature is fitted to).
+
+        :return: actions ``(n_envs, action_dim)``, the new plan and those costs
+        """
         generator = self.generator(deterministic)
-        plan, action_std = self.planner(observations.float(), previous_plan, self.temperature, generator)
-        actions = plan[:, 0]
+        last = self.planner.optimise(observations.float(), previous_plan, self.temperature, generator)
+        actions = last.plan[:, 0]
         if not deterministic:
+            action_std = weighted_action_std(last.weights, last.samples, last.plan)
             noise = th.randn(actions.shape, generator=generator, device=actions.device, dtype=actions.dtype)
             actions = th.clamp(actions + action_std * noise, self.action_low, self.action_high)
-        return actions, plan
+        return actions, last.plan, last.costs
 
     def forward(self, obs: th.Tensor, deterministic: bool = False) -> th.Tensor:
         return self._predict(obs, deterministic)

@@ -273,3 +273,49 @@ def test_float64_observations_train_and_plan_in_float32(demos):
     model.learn(64)
     actions, plan = model.predict(env.reset(), deterministic=True)
     assert actions.shape == (2, 1) and np.isfinite(actions).all() and plan.dtype == np.float32
+
+
+def test_learned_temperature_falls_as_the_weights_sharpen_and_is_saved(demos, tmp_path):
+    model = make_model(demos, temperature="learned", temperature_learning_rate=0.05, min_temperature=0.02)
+    assert model.temperature() == 1.0
+    model.learn(32)
+    learned = model.temperature()
+    assert 0.02 <= learned < 0.5 and model.policy.temperature.item() == pytest.approx(learned)
+    model.save(tmp_path / "model")
+    loaded = MPAIL.load(tmp_path / "model")
+    assert loaded.temperature() == pytest.approx(learned) and loaded.policy.temperature.item() == pytest.approx(learned)
+    assert loaded.temperature_optimizer.state_dict()["state"], "the RMSprop state is saved with the model"
+
+
+def test_learned_temperature_never_goes_below_its_floor(demos):
+    model = make_model(demos, temperature="learned", temperature_learning_rate=0.5, min_temperature=0.2).learn(32)
+    assert model.temperature() == pytest.approx(0.2)
+
+
+def test_an_unknown_temperature_mode_is_refused(demos):
+    with pytest.raises(ValueError, match="temperature must be one of"):
+        make_model(demos, temperature="annealed")
+
+
+def test_discriminator_replay_feeds_earlier_rollouts_to_later_updates_and_is_not_saved(demos, tmp_path, monkeypatch):
+    model = make_model(demos, discriminator_update_interval=1, discriminator_replay_size=40)
+    batch_sizes = []
+    discriminator = model.policy.discriminator
+    original = discriminator.forward
+
+    def recording_forward(state, action, next_state, done):
+        if discriminator.training:  # the updates, not the labelling of rewards
+            batch_sizes.append(len(state))
+        return original(state, action, next_state, done)
+
+    monkeypatch.setattr(discriminator, "forward", recording_forward)
+    model.learn(16)  # first rollout: nothing to replay yet
+    assert model.discriminator_replay.size() == 16
+    first = list(batch_sizes)
+    batch_sizes.clear()
+    model.learn(32, reset_num_timesteps=False)
+    # every agent minibatch of a later update holds as many replayed transitions as current ones
+    assert max(batch_sizes) == 2 * max(first)
+    assert model.discriminator_replay.size() == 40  # FIFO capacity
+    model.save(tmp_path / "model")
+    assert MPAIL.load(tmp_path / "model").discriminator_replay is None

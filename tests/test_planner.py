@@ -5,7 +5,7 @@ import pytest
 import torch as th
 from torch import nn
 
-from sb3_mpail.mppi import GaussianSampler, MPPIPlanner
+from sb3_mpail.mppi import DeltaSampler, GaussianSampler, MPPIPlanner
 from sb3_mpail.mppi.planner import mppi_weights, rollout, shift_plan, trajectory_costs, weighted_action_std
 
 
@@ -178,3 +178,42 @@ def test_samples_follow_each_action_dimensions_own_std_and_bounds(uniform):
     assert (actions >= sampler.action_low).all() and (actions <= sampler.action_high).all()
     unclamped_std = actions[:, 0].reshape(-1, 2).std(dim=0)  # env 0, dimension 0 is far from its bounds
     assert unclamped_std[0] == pytest.approx(float(sampler.noise_std[0]), rel=0.05)
+
+
+def delta_samples_step_by_step(sampler: DeltaSampler, plan: th.Tensor, noise: th.Tensor) -> th.Tensor:
+    """The delta sampler written as its docstring reads, one step at a time: a clamped random walk from the plan's start."""
+    horizon, n_envs, n_samples, _ = noise.shape
+    samples = th.empty_like(noise)
+    current = plan[:, 0].unsqueeze(1).expand(n_envs, n_samples, -1)
+    for step in range(horizon):
+        increment = plan[:, step] - plan[:, step - 1] if step > 0 else th.zeros_like(plan[:, 0])
+        change = th.clamp(increment.unsqueeze(1) + noise[step] * sampler.noise_std, -sampler.max_delta, sampler.max_delta)
+        current = current + change
+        samples[step] = current
+    return th.clamp(samples, sampler.action_low, sampler.action_high)
+
+
+@pytest.mark.parametrize("n_samples", [64, 7])
+def test_delta_samples_are_clamped_random_walks_around_the_plan_as_written_step_by_step(n_samples):
+    sampler = DeltaSampler(np.array([-1.0, -2.0], np.float32), np.array([1.0, 2.0], np.float32), [1.0, 0.5], [0.2, 0.1])
+    plan = th.stack([th.linspace(-0.5, 0.9, 6), th.linspace(1.5, -1.5, 6)], dim=-1).expand(3, 6, 2).contiguous()
+    actions = sampler(plan, n_samples, th.Generator().manual_seed(0))
+    noise = th.randn(actions.shape, generator=th.Generator().manual_seed(0))
+    assert th.allclose(actions, delta_samples_step_by_step(sampler, plan, noise), atol=1e-6)
+    # consecutive actions never jump by more than max_delta (in action units: relative to the half-range)
+    assert (th.diff(actions, dim=0).abs() <= sampler.max_delta + 1e-6).all()
+    assert th.allclose(sampler.max_delta, th.tensor([0.2, 0.2]))
+
+
+def test_delta_samples_without_noise_are_the_plan_where_its_increments_are_within_the_limit():
+    sampler = DeltaSampler(np.full(1, -1.0, np.float32), np.full(1, 1.0, np.float32), 0.0, 0.5)
+    plan = th.tensor([0.0, 0.3, 0.5, 0.4]).view(1, 4, 1)
+    actions = sampler(plan, 3, th.Generator().manual_seed(0))
+    assert th.allclose(actions[:, 0, :, 0], plan[0, :, 0].unsqueeze(1).expand(4, 3))
+
+
+def test_delta_sampler_refuses_a_negative_std_or_a_zero_step_limit():
+    with pytest.raises(ValueError, match="noise_std >= 0 and max_delta > 0"):
+        DeltaSampler(np.full(1, -1.0), np.full(1, 1.0), -0.1, 0.2)
+    with pytest.raises(ValueError, match="noise_std >= 0 and max_delta > 0"):
+        DeltaSampler(np.full(1, -1.0), np.full(1, 1.0), 0.5, 0.0)

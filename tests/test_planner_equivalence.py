@@ -107,6 +107,11 @@ def test_pendulum_plans_match_the_reference():
     assert_same_plans(*plan_both_ways(policy, pendulum_states(4)))
 
 
+def test_delta_sampling_plans_match_the_reference():
+    policy = make_policy(NAVIGATION, "bicycle", n_samples=128, sampler="delta", noise_std=[1.0, 0.5])
+    assert_same_plans(*plan_both_ways(policy, navigation_states(3)))
+
+
 @pytest.mark.parametrize("switches", [dict(use_terminal_value=False), dict(use_step_cost=False)])
 def test_ablations_match_the_reference(switches):
     policy = make_policy(NAVIGATION, "bicycle", n_samples=128, **switches)

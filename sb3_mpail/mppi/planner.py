@@ -38,6 +38,7 @@ from sb3_mpail.mppi.reference import (
 from sb3_mpail.mppi.reference import rollout as rollout_step_by_step
 
 __all__ = [
+    "LastIteration",
     "MPPIPlanner",
     "PlanResult",
     "TrajectoryCost",
@@ -56,6 +57,15 @@ class PlanResult(NamedTuple):
 
     plan: th.Tensor  #: optimised action sequence per env, ``(n_envs, horizon, action_dim)``
     action_std: th.Tensor  #: weighted std of the first action per env, ``(n_envs, action_dim)``
+
+
+class LastIteration(NamedTuple):
+    """The last MPPI iteration of a planning step, as :meth:`MPPIPlanner.optimise` leaves it."""
+
+    plan: th.Tensor  #: the plan it gave, ``(n_envs, horizon, action_dim)``
+    samples: th.Tensor  #: its sampled sequences, ``(horizon, n_envs, n_samples, action_dim)``
+    weights: th.Tensor  #: their MPPI weights, ``(n_envs, n_samples)``
+    costs: th.Tensor  #: their trajectory costs, ``(n_envs, n_samples)``
 
 
 def rollout(dynamics: DynamicsFunction, initial_states: th.Tensor, actions: th.Tensor) -> th.Tensor:
@@ -231,18 +241,13 @@ class MPPIPlanner(nn.Module):
         :param temperature: ``lambda`` of the exponential weights (scalar tensor)
         :param generator: source of the sampling noise
         """
-        plan, actions, weights = self.optimise(states, previous_plan, temperature, generator)
-        return PlanResult(plan, weighted_action_std(weights, actions, plan))
+        last = self.optimise(states, previous_plan, temperature, generator)
+        return PlanResult(last.plan, weighted_action_std(last.weights, last.samples, last.plan))
 
     def optimise(
         self, states: th.Tensor, previous_plan: th.Tensor, temperature: th.Tensor, generator: th.Generator
-    ) -> Tuple[th.Tensor, th.Tensor, th.Tensor]:
-        """
-        The ``J`` iterations of one planning step (what :meth:`forward` runs), keeping the last iteration's samples.
-
-        :return: the plan ``(n_envs, horizon, action_dim)``, the last iteration's sampled sequences ``(horizon, n_envs,
-            n_samples, action_dim)`` and their MPPI weights ``(n_envs, n_samples)``
-        """
+    ) -> LastIteration:
+        """The ``J`` iterations of one planning step (what :meth:`forward` runs), keeping the last one's samples."""
         plan = shift_plan(previous_plan, self.neutral_action)
         trajectory_cost = self.trajectory_cost(states, plan.shape[1])
         update = self._update
@@ -250,17 +255,17 @@ class MPPIPlanner(nn.Module):
             update = self._compiled()
         for _ in range(self.n_iterations):
             actions = self.sampler(plan, self.n_samples, generator)
-            plan, weights = update(states, actions, temperature, trajectory_cost)
-        return plan, actions, weights
+            plan, weights, costs = update(states, actions, temperature, trajectory_cost)
+        return LastIteration(plan, actions, weights, costs)
 
     def _update(
         self, states: th.Tensor, actions: th.Tensor, temperature: th.Tensor, trajectory_cost: TrajectoryCost
-    ) -> Tuple[th.Tensor, th.Tensor]:
-        """One MPPI iteration after sampling: roll out, cost, weight, new plan (and the weights)."""
+    ) -> Tuple[th.Tensor, th.Tensor, th.Tensor]:
+        """One MPPI iteration after sampling: roll out, cost, weight, new plan (and the weights and costs)."""
         states_visited = rollout(self.dynamics, states, actions)
         costs = trajectory_cost(states_visited)
         weights = mppi_weights(costs, temperature)
-        return weighted_mean(weights, actions), weights
+        return weighted_mean(weights, actions), weights, costs
 
     def _compiled(self) -> Callable:
         if self._compiled_update is None:
