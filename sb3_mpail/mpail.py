@@ -1,31 +1,49 @@
 """Model Predictive Adversarial Imitation Learning (Han et al., ICLR 2026) as a Stable-Baselines3 algorithm."""
 
 import io
+import json
 import math
 import os
 import pathlib
 import sys
 import time
+import zipfile
 from typing import Any, ClassVar, Dict, Iterable, List, Tuple, Type, TypeVar, Union
 
 import numpy as np
 import torch as th
 from gymnasium import spaces
+from gymnasium.wrappers import NormalizeObservation
 from imitation.data.buffer import Buffer
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 from stable_baselines3.common.utils import explained_variance, safe_mean
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import VecEnv, unwrap_vec_normalize
 from torch.nn import functional as F
 
 from sb3_mpail.buffers import TransitionRolloutBuffer
+from sb3_mpail.checks import (
+    BETAS,
+    FRACTION,
+    NON_NEGATIVE_INTEGER,
+    NON_NEGATIVE_NUMBER,
+    OPTIONAL_DICT,
+    POSITIVE_INTEGER,
+    POSITIVE_NUMBER,
+    SEED,
+    UNIT_INTERVAL,
+    check_arguments,
+    check_finite,
+)
 from sb3_mpail.demos import DemoSource, ExpertTransitions, load_demos
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, LearnedDynamics
-from sb3_mpail.policies import MlpMPPI, MPPIPolicy
+from sb3_mpail.policies import NON_FINITE_OBSERVATION, NON_FINITE_PLAN, MlpMPPI, MPPIPolicy
 
 SelfMPAIL = TypeVar("SelfMPAIL", bound="MPAIL")
+#: settings every MPAIL model file holds and other algorithms' files do not
+MPAIL_SETTINGS = ("discriminator_learning_rate", "initial_temperature", "episodes_completed")
 
 #: how the MPPI temperature can move (:class:`MPAIL`'s ``temperature``)
 TEMPERATURES = ("decay", "learned")
@@ -81,6 +99,7 @@ class MPAIL(BaseAlgorithm):
     :param seed: seed of networks, environments and planner noise
     :param device: ``"cpu"``, ``"cuda"`` or ``"auto"``
     :param _init_setup_model: build the networks at construction (``False`` when loading)
+    :raises ValueError: a setting is out of its range (each is named), or the env's observations are normalised
     """
 
     policy_aliases: ClassVar[Dict[str, Type[BasePolicy]]] = {"MlpMPPI": MlpMPPI}
@@ -159,13 +178,41 @@ class MPAIL(BaseAlgorithm):
         self.n_iterations = 0
         self.expert: ExpertTransitions | None = None
         self._plan: th.Tensor | None = None
+        self._check_settings()
         if env is not None:
             self._check_spaces()
+            _refuse_normalised_observations(self.env)
             self._default_dynamics()
         if _init_setup_model:
             self._setup_model()
         if demos is not None:
             self.set_demos(demos)
+
+    def _check_settings(self) -> None:
+        """Refuses settings that would train or plan nonsense, naming each (at construction, and after ``load``'s)."""
+        check_arguments(
+            n_steps=(self.n_steps, POSITIVE_INTEGER),
+            gamma=(self.gamma, UNIT_INTERVAL),
+            gae_lambda=(self.gae_lambda, UNIT_INTERVAL),
+            n_epochs=(self.n_epochs, POSITIVE_INTEGER),
+            n_minibatches=(self.n_minibatches, POSITIVE_INTEGER),
+            discriminator_learning_rate=(self.discriminator_learning_rate, POSITIVE_NUMBER),
+            discriminator_betas=(self.discriminator_betas, BETAS),
+            discriminator_l2=(self.discriminator_l2, NON_NEGATIVE_NUMBER),
+            discriminator_update_interval=(self.discriminator_update_interval, POSITIVE_INTEGER),
+            discriminator_replay_size=(self.discriminator_replay_size, NON_NEGATIVE_INTEGER),
+            value_learning_rate=(self.value_learning_rate, POSITIVE_NUMBER),
+            value_betas=(self.value_betas, BETAS),
+            value_clip=(self.value_clip, POSITIVE_NUMBER),
+            max_grad_norm=(self.max_grad_norm, POSITIVE_NUMBER),
+            initial_temperature=(self.initial_temperature, POSITIVE_NUMBER),
+            temperature_decay=(self.temperature_decay, FRACTION),
+            min_temperature=(self.min_temperature, POSITIVE_NUMBER),
+            stats_window_size=(self._stats_window_size, POSITIVE_INTEGER),
+            policy_kwargs=(self.policy_kwargs, OPTIONAL_DICT),
+            verbose=(self.verbose, NON_NEGATIVE_INTEGER),
+            seed=(self.seed, SEED),
+        )
 
     def _check_spaces(self) -> None:
         if not isinstance(self.action_space, spaces.Box):
@@ -205,6 +252,17 @@ class MPAIL(BaseAlgorithm):
         self.value_optimizer = th.optim.Adam(
             self.policy.value_net.parameters(), lr=self.value_learning_rate, betas=self.value_betas
         )
+
+    def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
+        """
+        Sets a new environment (same spaces and number of envs), refusing one whose observations are normalised.
+
+        :param env: a ``gym.Env`` or ``VecEnv``
+        :param force_reset: reset it before training goes on
+        """
+        env = self._wrap_env(env, self.verbose)
+        _refuse_normalised_observations(env)
+        super().set_env(env, force_reset)
 
     def set_random_seed(self, seed: int | None = None) -> None:
         """Seeds python, numpy, torch, the action space, the env and the planner's noise."""
@@ -248,6 +306,36 @@ class MPAIL(BaseAlgorithm):
         if self.temperature_mode == "learned":
             return [*state_dicts, "temperature_optimizer"], ["log_temperature"]
         return state_dicts, []
+
+    @classmethod
+    def load(
+        cls: Type[SelfMPAIL],
+        path: Union[str, pathlib.Path, io.BufferedIOBase],
+        env: GymEnv | None = None,
+        device: Union[th.device, str] = "auto",
+        custom_objects: Dict[str, Any] | None = None,
+        print_system_info: bool = False,
+        force_reset: bool = True,
+        **kwargs: Any,
+    ) -> SelfMPAIL:
+        """
+        Loads a model saved by :meth:`save` (Stable-Baselines3's ``load``), after checking that the file is a whole
+        MPAIL model; settings given as ``kwargs`` are checked as the constructor checks them.
+
+        :param path: the model file (``.zip`` may be left out) or a file object
+        :param env: the environment to go on with (``None`` to plan only)
+        :param device: ``"cpu"``, ``"cuda"`` or ``"auto"``
+        :param custom_objects: saved objects to replace rather than unpickle
+        :param print_system_info: print the saving and the current system's information
+        :param force_reset: reset ``env`` before training goes on
+        :param kwargs: settings to change, e.g. ``n_steps``
+        :raises FileNotFoundError: there is no such file
+        :raises ValueError: the file is empty, truncated, damaged or not a zip archive, or it is not an MPAIL model
+        """
+        _check_model_file(path)
+        model = super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
+        model._check_settings()
+        return model
 
     def save(
         self,
@@ -329,6 +417,7 @@ class MPAIL(BaseAlgorithm):
         if self._plan is None or self._plan.shape[0] != env.num_envs:
             self._plan = self.policy.initial_plan(env.num_envs)
         callback.on_rollout_start()
+        check_finite(self._last_obs, "The observation the environment returned", NON_FINITE_OBSERVATION)
         for _ in range(n_rollout_steps):
             fresh = th.as_tensor(self._last_episode_starts, device=self.device).view(-1, 1, 1)
             self._plan = th.where(fresh, self.policy.initial_plan(env.num_envs), self._plan)
@@ -337,7 +426,9 @@ class MPAIL(BaseAlgorithm):
             if self.temperature_mode == "learned":
                 self._learn_temperature(costs)
             actions = actions.cpu().numpy()
+            check_finite(actions, "The action planned from a finite observation", NON_FINITE_PLAN)
             new_obs, _, dones, infos = env.step(actions)
+            check_finite(new_obs, "The observation the environment returned", NON_FINITE_OBSERVATION)
             self.num_timesteps += env.num_envs
             callback.update_locals(locals())
             if not callback.on_step():
@@ -348,6 +439,7 @@ class MPAIL(BaseAlgorithm):
             for index in np.flatnonzero(dones):
                 next_obs[index] = infos[index]["terminal_observation"]
                 timeouts[index] = infos[index].get("TimeLimit.truncated", False)
+            check_finite(next_obs, "The terminal observation the environment returned", NON_FINITE_OBSERVATION)
             self.rollout_buffer.add_transition(self._last_obs, actions, next_obs, self._last_episode_starts, timeouts)
             self.episodes_completed += int(dones.sum())
             if self.temperature_mode == "decay":
@@ -498,3 +590,67 @@ class MPAIL(BaseAlgorithm):
         self.logger.record("time/time_elapsed", int(time_elapsed), exclude="tensorboard")
         self.logger.record("time/total_timesteps", self.num_timesteps, exclude="tensorboard")
         self.logger.dump(step=self.num_timesteps)
+
+
+def _refuse_normalised_observations(env: VecEnv) -> None:
+    """
+    Refuses an environment whose observations are normalised (SB3's ``VecNormalize`` with ``norm_obs``, gymnasium's
+    ``NormalizeObservation``): the planner rolls them through a dynamics model of the raw states.
+
+    :param env: the environment, wrapped as a ``VecEnv``
+    :raises ValueError: its observations are normalised
+    """
+    vec_normalize = unwrap_vec_normalize(env)
+    wrapped = [index for index, is_wrapped in enumerate(env.env_is_wrapped(NormalizeObservation)) if is_wrapped]
+    if (vec_normalize is None or not vec_normalize.norm_obs) and not wrapped:
+        return
+    wrapper = "VecNormalize(norm_obs=True)" if not wrapped else f"gymnasium's NormalizeObservation (env {wrapped[0]})"
+    raise ValueError(
+        f"MPAIL needs the environment's raw observations, but this one is wrapped in {wrapper}: the planner rolls "
+        "observations through a dynamics model of the raw states, and its learned cost and value judge the states that "
+        "model predicts. Pass the environment without the wrapper (rl_zoo3: normalize: false). Rewards may stay "
+        "normalised (VecNormalize(norm_obs=False)): MPAIL learns its own."
+    )
+
+
+def _check_model_file(path: Union[str, pathlib.Path, io.BufferedIOBase]) -> None:
+    """
+    Refuses what :meth:`MPAIL.load` cannot load, naming the file and what is wrong with it.
+
+    :param path: the model file (``.zip`` may be left out, as Stable-Baselines3 allows) or a file object
+    :raises FileNotFoundError: there is no such file
+    :raises ValueError: the file is empty, truncated, damaged or not a zip archive, or it is not an MPAIL model
+    """
+    if isinstance(path, io.BufferedIOBase):
+        name, source, start = getattr(path, "name", "<file object>"), path, path.tell()
+    else:
+        given = pathlib.Path(path)
+        name = source = given if given.exists() else given.with_name(given.name + ".zip")
+        if not source.exists():
+            raise FileNotFoundError(f"MPAIL model file {given} does not exist (nor {source}).")
+        if source.stat().st_size == 0:
+            raise ValueError(f"MPAIL model file {source} is empty (0 bytes): it was not saved whole.")
+    try:
+        with zipfile.ZipFile(source) as archive:
+            members = archive.namelist()
+            damaged = archive.testzip()
+            data = json.loads(archive.read("data")) if "data" in members and damaged is None else None
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError) as error:
+        raise ValueError(f"MPAIL model file {name} is truncated or not a zip archive ({error}).") from error
+    finally:
+        if isinstance(path, io.BufferedIOBase):
+            path.seek(start)
+    if damaged is not None:
+        raise ValueError(f"MPAIL model file {name} is damaged: its member {damaged} fails its CRC check (corrupted data).")
+    if data is None or "policy.pth" not in members:
+        raise ValueError(
+            f"MPAIL model file {name} is truncated or not saved by Stable-Baselines3: it lacks the 'data' or 'policy.pth' "
+            f"member (it holds {members})."
+        )
+    missing = [setting for setting in MPAIL_SETTINGS if setting not in data]
+    if missing:
+        policy_module = data.get("policy_class", {}).get("__module__", "an unknown module")
+        raise ValueError(
+            f"Model file {name} is not an MPAIL model: it lacks MPAIL's settings {missing}, and its policy class comes from "
+            f"{policy_module}. Load it with the algorithm that saved it."
+        )

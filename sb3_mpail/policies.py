@@ -8,6 +8,14 @@ from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
 from torch import nn
 
+from sb3_mpail.checks import (
+    HIDDEN_SIZES,
+    NON_NEGATIVE_NUMBER,
+    OPTIONAL_DICT,
+    check_arguments,
+    check_finite,
+    per_action_dimension,
+)
 from sb3_mpail.mppi.costs import (
     FeatureMap,
     FeatureSpec,
@@ -22,6 +30,12 @@ from sb3_mpail.mppi.sampling import make_sampler
 
 #: the deterministic-planning noise stream is seeded with ``seed + DETERMINISTIC_SEED_OFFSET``
 DETERMINISTIC_SEED_OFFSET = 1_000_003
+#: what the errors on a non-finite observation and on a non-finite plan advise
+NON_FINITE_OBSERVATION = "the planner cannot plan from it. Check the environment (SB3's VecCheckNan wrapper finds the step)."
+NON_FINITE_PLAN = (
+    "the step cost, value or dynamics model returned NaN or infinite values (e.g. training diverged, or a learned "
+    "model met states far outside its data)."
+)
 
 
 class MPPIPolicy(BasePolicy):
@@ -38,7 +52,8 @@ class MPPIPolicy(BasePolicy):
     :param n_samples: ``N``, sampled sequences per env and iteration
     :param horizon: ``H``, planning horizon in env steps
     :param n_iterations: ``J``, MPPI iterations per planning step
-    :param noise_std: sampling std relative to the action half-range (paper's ``Sigma = diag(0.3)``)
+    :param noise_std: sampling std relative to the action half-range (paper's ``Sigma = diag(0.3)``), ``>= 0``: one
+        number for all action dimensions or one per dimension
     :param markup: ``eta`` on step costs (paper: 1.01, about ``1 / gamma``)
     :param use_step_cost: plan with the discriminator's step costs (``False``: value-only ablation)
     :param use_terminal_value: bootstrap with the value (``False``: cost-only ablation)
@@ -61,6 +76,7 @@ class MPPIPolicy(BasePolicy):
     :param terminal_value: replaces the learned value in the planner: ``V(states)`` over any leading shape
     :param compile_planner: compile the planner's roll-out/cost/weight update with ``torch.compile``: ``False``
         (default), ``True`` or a ``torch.compile`` mode (``"reduce-overhead"`` uses CUDA graphs on a GPU); same plans
+    :raises ValueError: a setting is out of its range (each is named)
     """
 
     def __init__(
@@ -89,6 +105,13 @@ class MPPIPolicy(BasePolicy):
         super().__init__(observation_space, action_space)
         if not isinstance(observation_space, spaces.Box) or len(observation_space.shape) != 1:
             raise ValueError(f"MPPI policies plan on flat Box observations; got {observation_space}.")
+        check_arguments(
+            dynamics_kwargs=(dynamics_kwargs, OPTIONAL_DICT),
+            noise_std=(noise_std, per_action_dimension(NON_NEGATIVE_NUMBER, action_space.shape[0])),
+            discriminator_hidden_sizes=(discriminator_hidden_sizes, HIDDEN_SIZES),
+            value_hidden_sizes=(value_hidden_sizes, HIDDEN_SIZES),
+            sampler_kwargs=(sampler_kwargs, OPTIONAL_DICT),
+        )
         self._constructor_kwargs = dict(
             dynamics=dynamics,
             dynamics_kwargs=dynamics_kwargs,
@@ -233,28 +256,36 @@ class MPPIPolicy(BasePolicy):
         :param episode_start: per env, whether its episode just started (its plan is reset)
         :param deterministic: execute the plan's first action instead of sampling around it
         :return: the actions and the plans to pass back as ``state`` on the next call
+        :raises ValueError: an observation or ``state`` holds NaN or infinite values, or the planner made such a plan (the
+            error names the env)
         """
         self.set_training_mode(False)
         observations, vectorized = self.obs_to_tensor(observation)
         n_envs = observations.shape[0]
+        check_finite(np.asarray(observation).reshape(n_envs, -1), "The observation passed to predict", NON_FINITE_OBSERVATION)
         with th.no_grad():
             fresh = self.initial_plan(n_envs)
             if state is None:
                 plan = fresh
             else:
-                plan = th.as_tensor(np.asarray(state), dtype=th.float32, device=self.device)
+                state = np.asarray(state)
+                plan = th.as_tensor(state, dtype=th.float32, device=self.device)
                 if plan.shape != fresh.shape:
                     raise ValueError(
                         f"state must be the plans returned by predict, shape {tuple(fresh.shape)}; got {tuple(plan.shape)}."
                     )
+                check_finite(
+                    state, "The state passed to predict", "pass back the plans predict returned, or None to start afresh."
+                )
                 if episode_start is not None:
                     restart = th.as_tensor(np.asarray(episode_start, dtype=bool).reshape(n_envs, 1, 1), device=self.device)
                     plan = th.where(restart, fresh, plan)
             actions, plan = self.act(observations, plan, deterministic)
-        actions = actions.cpu().numpy()
+        actions, plan = actions.cpu().numpy(), plan.cpu().numpy()
+        check_finite(plan, "The plan made from a finite observation and state", NON_FINITE_PLAN)
         if not vectorized:
             actions = actions.squeeze(axis=0)
-        return actions, plan.cpu().numpy()
+        return actions, plan
 
 
 MlpMPPI = MPPIPolicy

@@ -34,3 +34,13 @@ def test_zoo_train_then_enjoy_on_a_tiny_budget(tmp_path):
                   "-n", "210", "--deterministic")
     assert enjoyed.returncode == 0, enjoyed.stderr[-3000:]
     assert "Episode Reward" in enjoyed.stdout
+
+
+def test_zoo_train_with_normalize_true_is_refused_saying_why(tmp_path):
+    config = tmp_path / "mpail.yml"
+    config.write_text(CONFIG.format(demos=ROOT / "demos" / "pendulum_4.npz") + "  normalize: true\n")
+    trained = zoo("train", "--algo", "mpail", "--env", "Pendulum-v1", "-conf", str(config), "-f", str(tmp_path / "logs"))
+    assert trained.returncode == 1
+    refusal = "ValueError: MPAIL needs the environment's raw observations, but this one is wrapped in VecNormalize"
+    assert refusal in trained.stderr, trained.stderr[-3000:]
+    assert "(rl_zoo3: normalize: false)" in trained.stderr

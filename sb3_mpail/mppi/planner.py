@@ -25,6 +25,7 @@ from typing import Callable, NamedTuple, Optional, Sequence, Tuple, Union
 import torch as th
 from torch import nn
 
+from sb3_mpail.checks import POSITIVE_INTEGER, POSITIVE_NUMBER, Rule, check_arguments
 from sb3_mpail.mppi.dynamics import DynamicsFunction
 from sb3_mpail.mppi.fused import Workspace
 from sb3_mpail.mppi.reference import (
@@ -50,6 +51,12 @@ __all__ = [
     "weighted_mean",
     "weighted_plan",
 ]
+
+#: what ``compile_planner`` may be (the modes are looked up only for a string: listing them imports torch's compiler)
+COMPILE_PLANNER = Rule(
+    "False, True or a torch.compile mode (one of torch._inductor.list_mode_options())",
+    lambda value: isinstance(value, bool) or (isinstance(value, str) and value in th._inductor.list_mode_options()),
+)
 
 
 class PlanResult(NamedTuple):
@@ -196,6 +203,13 @@ class MPPIPlanner(nn.Module):
         compile_planner: Union[bool, str] = False,
     ):
         super().__init__()
+        check_arguments(
+            n_samples=(n_samples, POSITIVE_INTEGER),
+            horizon=(horizon, POSITIVE_INTEGER),
+            n_iterations=(n_iterations, POSITIVE_INTEGER),
+            markup=(markup, POSITIVE_NUMBER),
+            compile_planner=(compile_planner, COMPILE_PLANNER),
+        )
         if not (use_step_cost or use_terminal_value):
             raise ValueError("The planner needs step costs, a terminal value or both; both were switched off.")
         self.dynamics = dynamics

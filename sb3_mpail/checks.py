@@ -1,0 +1,91 @@
+"""Checks that refuse bad input with an error naming it: constructor arguments, and per-env arrays that must be finite."""
+
+import math
+import numbers
+from collections.abc import Mapping, Sequence
+from typing import Any, Callable, NamedTuple, Tuple
+
+import numpy as np
+
+
+class Rule(NamedTuple):
+    """What an argument must be: ``holds(value)``, and ``expected`` as an error message says it."""
+
+    expected: str
+    holds: Callable[[Any], bool]
+
+
+def _is_integer(value: Any) -> bool:
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _is_sequence(value: Any) -> bool:
+    return isinstance(value, Sequence) and not isinstance(value, str)
+
+
+POSITIVE_INTEGER = Rule("a positive integer", lambda value: _is_integer(value) and value > 0)
+NON_NEGATIVE_INTEGER = Rule("a non-negative integer", lambda value: _is_integer(value) and value >= 0)
+#: a seed: a Python int (Python's ``random.seed`` refuses numpy's) or None
+SEED = Rule("a Python int or None", lambda value: value is None or (isinstance(value, int) and not isinstance(value, bool)))
+POSITIVE_NUMBER = Rule("a finite number > 0", lambda value: _is_number(value) and value > 0)
+NON_NEGATIVE_NUMBER = Rule("a finite number >= 0", lambda value: _is_number(value) and value >= 0)
+UNIT_INTERVAL = Rule("a number in [0, 1]", lambda value: _is_number(value) and 0 <= value <= 1)
+FRACTION = Rule("a number in [0, 1)", lambda value: _is_number(value) and 0 <= value < 1)
+BETAS = Rule(
+    "two numbers in [0, 1)", lambda value: _is_sequence(value) and len(value) == 2 and all(map(FRACTION.holds, value))
+)
+HIDDEN_SIZES = Rule(
+    "a sequence of positive integers", lambda value: _is_sequence(value) and all(map(POSITIVE_INTEGER.holds, value))
+)
+OPTIONAL_DICT = Rule("a dict or None", lambda value: value is None or isinstance(value, Mapping))
+
+
+def per_action_dimension(rule: Rule, action_dim: int) -> Rule:
+    """
+    ``rule`` for one value shared by every action dimension, or for each of ``action_dim`` values.
+
+    :param rule: what each value must be
+    :param action_dim: how many values a sequence must hold
+    """
+
+    def holds(value: Any) -> bool:
+        values = list(value) if _is_sequence(value) or np.ndim(value) == 1 else [value]
+        return len(values) in {1, action_dim} and all(map(rule.holds, values))
+
+    return Rule(f"{rule.expected}, or a sequence of such values, one per action dimension ({action_dim})", holds)
+
+
+def check_arguments(**arguments: Tuple[Any, Rule]) -> None:
+    """
+    Refuses arguments that break their rules, naming each of them with its value.
+
+    :param arguments: per argument name, its value and the :class:`Rule` it must keep
+    :raises ValueError: one or more arguments break their rules (all of them are named)
+    """
+    errors = [
+        f"{name} must be {rule.expected}; got {value!r}." for name, (value, rule) in arguments.items() if not rule.holds(value)
+    ]
+    if errors:
+        raise ValueError(" ".join(errors))
+
+
+def check_finite(array: np.ndarray, what: str, advice: str) -> None:
+    """
+    Refuses a per-env batch holding NaN or infinite values, naming the envs whose rows hold them.
+
+    :param array: a batch with one leading row per env, e.g. observations ``(n_envs, obs_dim)`` or plans
+        ``(n_envs, horizon, action_dim)``
+    :param what: what the batch is, as the message names it (e.g. ``"the observation passed to predict"``)
+    :param advice: what the user can do about it, appended to the message
+    :raises ValueError: some env's row is not finite
+    """
+    rows = np.asarray(array).reshape(len(array), -1)
+    bad = np.flatnonzero(~np.isfinite(rows).all(axis=1))
+    if len(bad) > 0:
+        first = f"env {bad[0]}: {rows[bad[0]]}"
+        envs = first if len(bad) == 1 else f"envs {bad.tolist()} ({first})"
+        raise ValueError(f"{what} holds NaN or infinite values for {envs}; {advice}")

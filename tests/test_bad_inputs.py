@@ -1,0 +1,355 @@
+"""Every bad input is refused with an error that names it and says what is wrong; nothing non-finite is carried on."""
+
+import io
+import re
+import subprocess
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from gymnasium import spaces
+from gymnasium.wrappers import NormalizeObservation
+from stable_baselines3 import PPO
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+from test_mpail import TINY_PLANNER, make_model, pendulum_trajectories
+from torch import nn
+
+from sb3_mpail import MPAIL
+from sb3_mpail.demos import load_demos
+from sb3_mpail.policies import MPPIPolicy
+
+OBSERVATION_SPACE = spaces.Box(-np.inf, np.inf, (3,), np.float32)
+
+
+@pytest.fixture(scope="module")
+def demos():
+    return pendulum_trajectories()
+
+
+@pytest.fixture(scope="module")
+def model(demos):
+    return make_model(demos)
+
+
+# --- non-finite observations, states and plans
+
+
+@pytest.mark.parametrize("bad_value", [np.nan, np.inf, -np.inf])
+def test_predict_refuses_a_non_finite_observation_naming_its_env(model, bad_value):
+    observations = np.array([[1.0, 0.0, 0.5], [1.0, bad_value, 0.5], [0.0, 1.0, 0.0]], np.float32)
+    with pytest.raises(ValueError, match=r"The observation passed to predict holds NaN or infinite values for env 1: "):
+        model.predict(observations)
+    with pytest.raises(ValueError, match="for env 0: "):  # one observation, not a batch
+        model.predict(observations[1])
+
+
+def test_predict_refuses_a_non_finite_state_naming_its_envs(model):
+    observations = np.zeros((3, 3), np.float32)
+    _, plans = model.predict(observations)
+    plans[[0, 2], 1, 0] = np.nan
+    with pytest.raises(ValueError, match=r"The state passed to predict holds NaN or infinite values for envs \[0, 2\]"):
+        model.predict(observations, state=plans)
+
+
+class NaNCostAbove(nn.Module):
+    """A step cost that is NaN where ``sin(theta)`` exceeds ``threshold``: a model gone wrong on part of the space."""
+
+    def __init__(self, threshold: float):
+        super().__init__()
+        self.threshold = threshold
+
+    def forward(self, states: th.Tensor, next_states: th.Tensor) -> th.Tensor:
+        return th.where(states[..., 1] > self.threshold, th.nan, 0.0)
+
+
+def test_predict_refuses_to_return_a_non_finite_plan_naming_its_env_and_plans_on_afterwards(demos):
+    policy_kwargs = dict(TINY_PLANNER, step_cost=NaNCostAbove(0.0))
+    model = make_model(demos, policy_kwargs=policy_kwargs)
+    observations = np.array([[1.0, -0.5, 0.0], [1.0, 0.5, 0.0]], np.float32)
+    with pytest.raises(
+        ValueError,
+        match=r"The plan made from a finite observation and state holds NaN .* for env 1: .*"
+        r"the step cost, value or dynamics model returned NaN",
+    ):
+        model.predict(observations)
+    actions, plans = model.predict(observations[:1])
+    assert np.isfinite(actions).all() and np.isfinite(plans).all()
+
+
+class NaNObservationAt(gym.Wrapper):
+    """Returns a NaN observation at step ``step`` of its first episode (0: the first reset)."""
+
+    def __init__(self, env: gym.Env, step: int):
+        super().__init__(env)
+        self.step_to_poison, self.steps = step, 0
+
+    def reset(self, **kwargs):
+        observation, info = self.env.reset(**kwargs)
+        if self.step_to_poison == 0 and self.steps == 0:
+            observation = np.full_like(observation, np.nan)
+        return observation, info
+
+    def step(self, action):
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        self.steps += 1
+        if self.steps == self.step_to_poison:
+            observation = np.full_like(observation, np.nan)
+        return observation, reward, terminated, truncated, info
+
+
+@pytest.mark.parametrize(
+    ("step", "what"),
+    [
+        (0, "The observation the environment returned"),
+        (3, "The observation the environment returned"),
+        (5, "The terminal observation the environment returned"),  # episodes of 5 steps
+    ],
+    ids=["reset", "during-an-episode", "terminal"],
+)
+def test_training_refuses_a_non_finite_observation_from_the_env_naming_its_env(demos, step, what):
+    def make(poisoned: bool):
+        env = gym.make("Pendulum-v1", max_episode_steps=5)
+        return NaNObservationAt(env, step) if poisoned else env
+
+    env = DummyVecEnv([lambda: make(False), lambda: make(True)])
+    model = MPAIL("MlpMPPI", env, demos, n_steps=16, policy_kwargs=TINY_PLANNER)
+    with pytest.raises(ValueError, match=f"{what} holds NaN or infinite values for env 1: .*VecCheckNan"):
+        model.learn(32)
+
+
+def test_training_refuses_a_non_finite_planned_action_naming_its_envs(demos):
+    model = make_model(demos, n_envs=2, policy_kwargs=dict(TINY_PLANNER, step_cost=NaNCostAbove(-2.0)))
+    with pytest.raises(ValueError, match=r"The action planned from a finite observation holds NaN .* for envs \[0, 1\] "):
+        model.learn(32)
+    assert model.num_timesteps == 0
+
+
+# --- constructor arguments
+
+
+def refusal(setting: str, value, expected: str) -> str:
+    """The whole message refusing ``value`` for ``setting``, as a regular expression."""
+    return f"^{re.escape(f'{setting} must be {expected}; got {value!r}.')}$"
+
+
+@pytest.mark.parametrize(
+    ("setting", "value", "expected"),
+    [
+        ("n_steps", 0, "a positive integer"),
+        ("n_steps", 2.5, "a positive integer"),
+        ("gamma", 1.5, "a number in [0, 1]"),
+        ("gae_lambda", -0.1, "a number in [0, 1]"),
+        ("n_epochs", 0, "a positive integer"),
+        ("n_minibatches", 0, "a positive integer"),
+        ("discriminator_learning_rate", 0.0, "a finite number > 0"),
+        ("discriminator_learning_rate", "1e-4", "a finite number > 0"),  # what YAML makes of 1e-4
+        ("discriminator_betas", (0.5, 1.0), "two numbers in [0, 1)"),
+        ("discriminator_l2", -1e-3, "a finite number >= 0"),
+        ("discriminator_update_interval", 0, "a positive integer"),
+        ("discriminator_replay_size", -1, "a non-negative integer"),
+        ("value_learning_rate", -1e-3, "a finite number > 0"),
+        ("value_betas", (0.9,), "two numbers in [0, 1)"),
+        ("value_clip", 0.0, "a finite number > 0"),
+        ("max_grad_norm", float("inf"), "a finite number > 0"),
+        ("initial_temperature", 0.0, "a finite number > 0"),
+        ("temperature_decay", 1.0, "a number in [0, 1)"),
+        ("min_temperature", 0.0, "a finite number > 0"),
+        ("stats_window_size", 0, "a positive integer"),
+        ("policy_kwargs", "dict(n_samples=16)", "a dict or None"),
+        ("verbose", -1, "a non-negative integer"),
+        ("seed", 1.5, "a Python int or None"),
+        ("seed", np.int64(1), "a Python int or None"),
+    ],
+)
+def test_an_out_of_range_mpail_setting_is_refused_naming_it(setting, value, expected):
+    with pytest.raises(ValueError, match=refusal(setting, value, expected)):
+        MPAIL("MlpMPPI", "Pendulum-v1", **{setting: value})
+
+
+@pytest.mark.parametrize(
+    ("setting", "value", "expected"),
+    [
+        ("n_samples", 0, "a positive integer"),
+        ("n_samples", True, "a positive integer"),
+        ("horizon", 0, "a positive integer"),
+        ("n_iterations", 0, "a positive integer"),
+        ("noise_std", -0.3, "a finite number >= 0, or a sequence of such values, one per action dimension (1)"),
+        ("noise_std", [0.3, 0.3], "a finite number >= 0, or a sequence of such values, one per action dimension (1)"),
+        ("markup", 0.0, "a finite number > 0"),
+        ("discriminator_hidden_sizes", (32, 0), "a sequence of positive integers"),
+        ("value_hidden_sizes", 32, "a sequence of positive integers"),
+        ("dynamics_kwargs", "dict()", "a dict or None"),
+        ("sampler_kwargs", [0.2], "a dict or None"),
+        ("compile_planner", "fastest", "False, True or a torch.compile mode (one of torch._inductor.list_mode_options())"),
+    ],
+)
+def test_an_out_of_range_planner_setting_is_refused_naming_it(setting, value, expected):
+    with pytest.raises(ValueError, match=refusal(setting, value, expected)):
+        MPAIL("MlpMPPI", "Pendulum-v1", policy_kwargs={setting: value})
+
+
+def test_every_bad_setting_is_named_at_once():
+    with pytest.raises(ValueError, match="^n_steps must be .*; got 0. gamma must be .*; got 2. min_temperature must be"):
+        MPAIL("MlpMPPI", "Pendulum-v1", n_steps=0, gamma=2, min_temperature=-1.0)
+
+
+def test_an_unknown_sampler_is_refused_naming_the_known_ones():
+    with pytest.raises(ValueError, match=r"Unknown sampler 'uniform': expected one of \['delta', 'gaussian'\]"):
+        MPAIL("MlpMPPI", "Pendulum-v1", policy_kwargs=dict(sampler="uniform"))
+
+
+def test_settings_at_the_edges_of_their_ranges_are_accepted():
+    edges = dict(
+        gamma=1.0,
+        gae_lambda=0.0,
+        discriminator_l2=0.0,
+        discriminator_replay_size=0,
+        temperature_decay=0.0,
+        discriminator_betas=[0.0, 0.0],
+        seed=3,
+        n_steps=np.int32(1),
+    )
+    planner = dict(
+        n_samples=1,
+        horizon=1,
+        n_iterations=1,
+        noise_std=np.array([0.0]),
+        discriminator_hidden_sizes=(),
+        compile_planner="reduce-overhead",
+    )
+    model = MPAIL("MlpMPPI", "Pendulum-v1", policy_kwargs=planner, **edges)
+    assert isinstance(model.policy, MPPIPolicy)
+    two_actions = spaces.Box(-1.0, 1.0, (2,), np.float32)
+    MPPIPolicy(spaces.Box(-1.0, 1.0, (4,), np.float32), two_actions, dynamics="learned", noise_std=[0.3, 0.1])
+
+
+def test_load_refuses_an_out_of_range_setting_naming_it(model, tmp_path):
+    model.save(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match="^n_steps must be a positive integer; got 0."):
+        MPAIL.load(tmp_path / "model.zip", n_steps=0)
+
+
+# --- model files
+
+
+@pytest.fixture(scope="module")
+def model_file(model, tmp_path_factory):
+    path = tmp_path_factory.mktemp("model") / "model.zip"
+    model.save(path)
+    return path
+
+
+@pytest.mark.parametrize("fraction", [0.1, 0.5, 0.9, 0.999])
+def test_load_of_a_truncated_file_names_the_file_and_says_it_is_truncated(model_file, tmp_path, fraction):
+    data = model_file.read_bytes()
+    truncated = tmp_path / "truncated.zip"
+    truncated.write_bytes(data[: int(len(data) * fraction)])
+    with pytest.raises(ValueError, match=f"MPAIL model file {truncated} is truncated"):
+        MPAIL.load(truncated)
+    with pytest.raises(ValueError, match=r"MPAIL model file <file object> is truncated"):
+        MPAIL.load(io.BytesIO(truncated.read_bytes()))
+
+
+def test_load_of_a_truncated_file_names_it_under_python_dash_o(model_file, tmp_path):
+    truncated = tmp_path / "truncated.zip"
+    truncated.write_bytes(model_file.read_bytes()[:5000])
+    script = f"from sb3_mpail import MPAIL\nMPAIL.load({str(truncated)!r})"
+    run = subprocess.run([sys.executable, "-O", "-c", script], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 1
+    assert f"ValueError: MPAIL model file {truncated} is truncated" in run.stderr, run.stderr[-2000:]
+
+
+def test_load_of_a_corrupted_file_names_the_damaged_member(model_file, tmp_path):
+    data = bytearray(model_file.read_bytes())
+    data[data.index(b"policy.pth") + 200] ^= 0xFF  # a byte of the policy's weights
+    corrupted = tmp_path / "corrupted.zip"
+    corrupted.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match=f"MPAIL model file {corrupted} is damaged: its member policy.pth fails its CRC"):
+        MPAIL.load(corrupted)
+
+
+@pytest.mark.parametrize(("content", "problem"), [(b"", r"is empty \(0 bytes\)"), (b"not a zip", "is truncated or not a zip")])
+def test_load_of_an_empty_or_non_zip_file_names_the_file_and_the_problem(tmp_path, content, problem):
+    path = tmp_path / "model.zip"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=f"MPAIL model file {path} {problem}"):
+        MPAIL.load(path)
+
+
+def test_load_of_a_missing_file_names_it(tmp_path):
+    missing = f"MPAIL model file {tmp_path / 'nowhere'} does not exist (nor {tmp_path / 'nowhere.zip'})."
+    with pytest.raises(FileNotFoundError, match=re.escape(missing)):
+        MPAIL.load(tmp_path / "nowhere")
+
+
+def test_load_of_another_algorithms_file_says_it_is_not_an_mpail_model(tmp_path):
+    PPO("MlpPolicy", "Pendulum-v1", n_steps=64).save(tmp_path / "ppo")
+    with pytest.raises(
+        ValueError,
+        match=f"Model file {tmp_path / 'ppo.zip'} is not an MPAIL model: it lacks MPAIL's "
+        r"settings .*policy class comes from stable_baselines3.common.policies",
+    ):
+        MPAIL.load(tmp_path / "ppo")
+
+
+# --- demo files
+
+
+@pytest.mark.parametrize(
+    ("write", "problem"),
+    [
+        (lambda path: path.write_bytes(b""), r"is empty \(0 bytes\)"),
+        (lambda path: np.savez(path, obs=np.zeros((0, 5, 3), np.float32)), "holds no episodes"),
+        (lambda path: np.savez(path, obs=np.zeros((2, 1, 3), np.float32)), "episode 0 must hold at least two observations"),
+        (lambda path: path.write_bytes(b"PK\x03\x04 half an archive"), "is not a readable .npz archive"),
+        (lambda path: path.write_text("obs = 1, 2, 3"), "is not a readable .npz archive"),
+    ],
+    ids=["empty-file", "no-demos", "one-observation", "truncated", "text"],
+)
+def test_a_bad_demo_file_is_refused_naming_the_file_and_the_problem(tmp_path, write, problem):
+    path = tmp_path / "demos.npz"
+    write(path)
+    with pytest.raises(ValueError, match=f"Demo file {path}:? {problem}"):
+        load_demos(path, OBSERVATION_SPACE)
+
+
+def test_an_npy_demo_file_is_refused_as_not_an_npz_archive(tmp_path):
+    np.save(tmp_path / "demos.npy", np.zeros((2, 5, 3), np.float32))
+    with pytest.raises(ValueError, match=f"Demo file {tmp_path / 'demos.npy'} is a single .npy array, not an .npz"):
+        load_demos(tmp_path / "demos.npy", OBSERVATION_SPACE)
+
+
+def test_an_empty_sequence_of_demo_trajectories_is_refused():
+    with pytest.raises(ValueError, match="The sequence of demo trajectories holds no episodes"):
+        load_demos([], OBSERVATION_SPACE)
+
+
+# --- environments with normalised observations
+
+
+def test_an_env_with_vecnormalize_observations_is_refused_saying_why(demos):
+    env = VecNormalize(make_vec_env("Pendulum-v1", n_envs=2))
+    with pytest.raises(
+        ValueError,
+        match=r"MPAIL needs the environment's raw observations, but this one is wrapped in "
+        r"VecNormalize\(norm_obs=True\): the planner rolls observations through a "
+        r"dynamics model of the raw states.*normalize: false",
+    ):
+        MPAIL("MlpMPPI", env, demos, policy_kwargs=TINY_PLANNER)
+
+
+def test_set_env_refuses_an_env_with_normalised_observations(model):
+    with pytest.raises(ValueError, match=r"wrapped in VecNormalize\(norm_obs=True\)"):
+        model.set_env(VecNormalize(make_vec_env("Pendulum-v1", n_envs=1)))
+    with pytest.raises(ValueError, match="wrapped in gymnasium's NormalizeObservation \\(env 0\\)"):
+        model.set_env(NormalizeObservation(gym.make("Pendulum-v1")))
+    assert not isinstance(model.env, VecNormalize)
+
+
+def test_an_env_with_normalised_rewards_only_is_accepted(demos):
+    env = VecNormalize(make_vec_env("Pendulum-v1", n_envs=1), norm_obs=False)
+    model = MPAIL("MlpMPPI", env, demos, n_steps=8, policy_kwargs=TINY_PLANNER).learn(8)
+    assert model.num_timesteps == 8
