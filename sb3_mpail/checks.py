@@ -44,6 +44,11 @@ HIDDEN_SIZES = Rule(
 OPTIONAL_DICT = Rule("a dict or None", lambda value: value is None or isinstance(value, Mapping))
 
 
+def one_of(choices: Sequence[str]) -> Rule:
+    """A rule for a name among ``choices``."""
+    return Rule(f"one of {list(choices)}", lambda value: isinstance(value, str) and value in choices)
+
+
 def per_action_dimension(rule: Rule, action_dim: int) -> Rule:
     """
     ``rule`` for one value shared by every action dimension, or for each of ``action_dim`` values.

@@ -36,6 +36,7 @@ from sb3_mpail.checks import (
     UNIT_INTERVAL,
     check_arguments,
     check_finite,
+    one_of,
 )
 from sb3_mpail.demos import DemoSource, ExpertTransitions, load_demos
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, LearnedDynamics
@@ -167,8 +168,6 @@ class MPAIL(BaseAlgorithm):
         self.value_betas = value_betas
         self.value_clip = value_clip
         self.max_grad_norm = max_grad_norm
-        if temperature not in TEMPERATURES:
-            raise ValueError(f"temperature must be one of {TEMPERATURES}; got {temperature!r}.")
         self.temperature_mode = temperature
         self.initial_temperature = initial_temperature
         self.temperature_decay = temperature_decay
@@ -208,6 +207,8 @@ class MPAIL(BaseAlgorithm):
             initial_temperature=(self.initial_temperature, POSITIVE_NUMBER),
             temperature_decay=(self.temperature_decay, FRACTION),
             min_temperature=(self.min_temperature, POSITIVE_NUMBER),
+            temperature=(self.temperature_mode, one_of(TEMPERATURES)),
+            temperature_learning_rate=(self.temperature_learning_rate, POSITIVE_NUMBER),
             stats_window_size=(self._stats_window_size, POSITIVE_INTEGER),
             policy_kwargs=(self.policy_kwargs, OPTIONAL_DICT),
             verbose=(self.verbose, NON_NEGATIVE_INTEGER),
