@@ -1,5 +1,5 @@
 """
-Checks of the planner on a GPU (issue 6), to run before timing it there: each prints PASS or FAIL with what it
+Checks of the planner on a GPU, to run before timing it there: each prints PASS or FAIL with what it
 measured, and the exit status is 1 if any failed.
 
 - the optimised planner gives the reference implementation's plans (float32, paper settings, same noise);

@@ -134,7 +134,7 @@ def main() -> None:
         f"python -m benchmarks.highway_model_error {args.scenario} --steps {args.steps} --horizon {args.horizon} "
         f"--seed {args.seed}"
     )
-    markdown = f"""## {road.env_id} planning model (issue 5, highway-env)
+    markdown = f"""## {road.env_id} planning model (highway-env)
 
 Prediction error of `{road.model_class.__name__}` (highway-env 1.9.1's kinematic bicycle: slip angle
 `arctan(tan(delta) / 2)`, length 5 m, 3 Euler steps of 1/15 s per action; {road.description}) against the simulator

@@ -80,12 +80,14 @@ def reevaluate(model_path: Path, n_episodes: int, seed: int) -> Tuple[float, flo
     :return: mean return and its normalised score
     """
     from sb3_mpail import MPAIL
-    from sb3_mpail.train_navigation import evaluate, normalized_score
+    from sb3_mpail.demos import shipped_demo_info
+    from sb3_mpail.evaluation import normalised_score
+    from sb3_mpail.train_navigation import REFERENCE, evaluate
 
     model = MPAIL.load(model_path, device="cpu")
     model.set_random_seed(seed)
     mean_return, _ = evaluate(model, n_episodes, seed)
-    return mean_return, normalized_score(mean_return)
+    return mean_return, normalised_score(mean_return, shipped_demo_info(REFERENCE))
 
 
 def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
@@ -95,8 +97,10 @@ def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
     :param args: this benchmark's command line
     :param wall_seconds: the whole benchmark's wall-clock (``None``: not measured, e.g. ``--report-only``)
     """
+    from sb3_mpail.demos import shipped_demo_info
+    from sb3_mpail.evaluation import reference_returns
     from sb3_mpail.plotting import plot_learning_curves
-    from sb3_mpail.train_navigation import demo_reference_returns
+    from sb3_mpail.train_navigation import REFERENCE
 
     results = []
     for seed in args.seeds:
@@ -127,7 +131,7 @@ def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
     if example.exists():
         shutil.copyfile(example, example_figure)
     first = results[0]
-    random_return, expert_return = demo_reference_returns()
+    random_return, expert_return = reference_returns(shipped_demo_info(REFERENCE))
     command = "python -m benchmarks.navigation " + " ".join(option for option in sys.argv[1:] if option != "--report-only")
     lines = [
         "## Navigation (`sb3_mpail/Navigation-v0`): learning with the default CPU settings",
@@ -141,7 +145,7 @@ def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
         "the paper's. Score = (R - random) / (expert - random) with R the deterministic planner's mean return "
         f"({first['n_eval_episodes']} episodes per learning-curve point); expert {expert_return:.1f}, random "
         f"{random_return:.1f} "
-        "(`demos/navigation.json`).",
+        "(`sb3_mpail/data/navigation.json`).",
         "",
         f"**Final normalised score: {scores.mean():.3f} ± {scores.std():.3f}** (mean ± std over {len(scores)} seeds of "
         f"the final models, each re-evaluated on {args.final_eval_episodes} fresh episodes; return "
@@ -176,7 +180,7 @@ def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--demos", default="demos/navigation_4.npz")
+    parser.add_argument("--demos", default="navigation_4", help="a shipped demo set's name or a demo file")
     parser.add_argument("--timesteps", type=int, default=None, help="default: the main command's")
     parser.add_argument("--eval-freq", type=int, default=10000)
     parser.add_argument("--n-eval-episodes", type=int, default=10, help="episodes per learning-curve point")

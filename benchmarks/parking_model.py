@@ -151,7 +151,7 @@ def main() -> None:
         f"python -m benchmarks.parking_model --steps {args.steps} --seed {args.seed} --rounds {args.rounds} "
         f"--speed-steps {args.speed_steps}"
     )
-    markdown = f"""## Parking-v0 planning model (issue 5, highway-env)
+    markdown = f"""## Parking-v0 planning model (highway-env)
 
 One-step prediction error of `ParkingKinematics` (highway-env 1.9.1's kinematic bicycle decoded from the
 observation) against the simulator on `sb3_mpail/Parking-v0`, over {args.steps} steps of uniformly random actions

@@ -8,7 +8,6 @@ BENCHMARKS.md and ``benchmarks/figures/pendulum.png``.
 """
 
 import argparse
-import json
 import time
 from pathlib import Path
 from typing import Dict, List
@@ -17,15 +16,14 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 
 from benchmarks.report import machine_description, write_section
 from sb3_mpail import MPAIL
-from sb3_mpail.demos import normalised_score
+from sb3_mpail.demos import shipped_demo_info
+from sb3_mpail.evaluation import evaluate_episodes, normalised_score
 
-ROOT = Path(__file__).resolve().parent.parent
-DEMOS = ROOT / "demos" / "pendulum_4.npz"
-EXPERT_STATS = json.loads((ROOT / "demos" / "pendulum.json").read_text())
+DEMOS = "pendulum_4"
+EXPERT_STATS = shipped_demo_info("pendulum")
 
 # Settings of this benchmark. The planner is lighter than the paper's N=512/J=5 so three seeds fit in minutes on a
 # 2-core CPU; the algorithm updates more often than the paper's 3:1 ratio because the budget is only 50k steps.
@@ -48,8 +46,7 @@ class EvaluationCurve(BaseCallback):
         self.curve: List[Dict[str, float]] = []
 
     def evaluate(self) -> float:
-        env = make_vec_env("Pendulum-v1", n_envs=self.n_episodes, seed=10_000)
-        mean_return, _ = evaluate_policy(self.model, env, n_eval_episodes=self.n_episodes, deterministic=True)
+        mean_return = evaluate_episodes(self.model, "Pendulum-v1", self.n_episodes, seed=10_000).mean_return
         score = normalised_score(mean_return, EXPERT_STATS)
         self.curve.append({"timesteps": self.num_timesteps, "return": mean_return, "score": score})
         return mean_return
@@ -120,9 +117,9 @@ def main() -> None:
         f"| {r['seed']} | {r['final_return']:.1f} | {r['final_score']:.3f} | {reach or 'not reached'} | {r['seconds']:.0f} |"
         for r, reach in zip(results, reached)
     )
-    markdown = f"""## Pendulum-v1 (issue 2's first learning check)
+    markdown = f"""## Pendulum-v1: the first learning check
 
-MPAIL from 4 observation-only demos (`demos/pendulum_4.npz`), exact pendulum model, {N_ENVS} envs,
+MPAIL from 4 observation-only demos (the shipped `pendulum_4`), exact pendulum model, {N_ENVS} envs,
 {args.timesteps} env steps, settings `{SETTINGS}`. Deterministic evaluation on {args.eval_episodes} episodes
 (fixed seeds) every {args.eval_every} steps. Normalised score: random = 0 ({EXPERT_STATS['random_return_mean']:.1f}),
 expert = 1 (SAC, {EXPERT_STATS['expert_return_mean']:.1f}).
@@ -139,7 +136,7 @@ Command: `{command}` on {machine_description()}.
 """
     print(markdown)
     if not args.no_write:
-        plot(results, ROOT / "benchmarks" / "figures" / "pendulum.png")
+        plot(results, Path(__file__).resolve().parent / "figures" / "pendulum.png")
         write_section("pendulum", markdown)
 
 

@@ -336,7 +336,7 @@ def main(argv: Optional[List[str]] = None) -> None:
         )
     command = "python -m benchmarks.planner_speed " + " ".join(argv if argv is not None else sys.argv[1:])
     markdown = (
-        f"## Planner speed (issues 2 and 6)\n\n"
+        f"## Planner speed\n\n"
         f"One planning step = every env planned once at the paper's settings (N=512, H=10, J=5), kinematic bicycle, "
         f"2x32 discriminator cost on (s, s') and 2x32 value, float32; median over repeats after warm-up, "
         f"each case in its own process, the fastest of {args.rounds} rounds over all cases. Peak memory: on CPU the "

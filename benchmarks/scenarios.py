@@ -1,22 +1,22 @@
 """
-Issue 5's scenarios beyond the navigation task. Each scenario trains MPAIL with the hyperparameters of its entry in
-``zoo_configs/mpail.yml`` (the same ones ``python -m sb3_mpail.zoo train --algo mpail --env <id> -conf
-zoo_configs/mpail.yml`` uses) from its shipped demos, over several seeds, and evaluates the deterministic planner:
+The scenarios beyond the navigation task. Each scenario trains MPAIL with the hyperparameters of its entry in the
+package's ``sb3_mpail/hyperparams/mpail.yml`` (the same ones ``python -m sb3_mpail.zoo train --algo mpail --env <id>``
+uses) from its shipped demos, over several seeds, and evaluates the deterministic planner. The expert's and the random
+policy's figures come from the shipped demos' information file (``sb3_mpail/data/<name>.json``):
 
-- ``cartpole``: MPAIL-OM's return as a normalised score (random = 0, expert = 1, from ``demos/cartpole.json``);
+- ``cartpole``: MPAIL-OM's return as a normalised score (random = 0, expert = 1);
 - ``lap``: the single noisy, partially observed demo: cross-track error to the demo's recorded path (mean and max
-  over 5 laps) and mean speed, next to the scripted driver's own (``demos/lap.json``);
-- ``parking``: highway-env ``parking-v0``'s return as a normalised score and the share of episodes ending parked
-  (``demos/parking.json``);
+  over 5 laps) and mean speed, next to the scripted driver's own;
+- ``parking``: highway-env ``parking-v0``'s return as a normalised score and the share of episodes ending parked;
 - ``racetrack``: highway-env ``racetrack-v0`` (no other vehicles) driven by steering: its return as a normalised
-  score and the share of steps on the road (``demos/racetrack.json``);
+  score and the share of steps on the road;
 - ``highway``: highway-env ``highway-v0`` (no other vehicles) driven by acceleration and steering: its return as a
-  normalised score, the share of steps on the road and the mean speed (``demos/highway.json``);
+  normalised score, the share of steps on the road and the mean speed;
 - ``ant``: MuJoCo Ant with an online-learned model (MPAIL-OM): its return as a normalised score and its forward speed,
-  next to the expert's (``demos/ant.json``);
+  next to the expert's;
 - ``pointmaze``: gymnasium-robotics PointMaze (U-maze, fixed start and goal cells) planned through a wall-free
   point-mass model: its return as a normalised score, the share of episodes ending at the goal and the share of
-  steps touching a wall (``demos/pointmaze.json``).
+  steps touching a wall.
 
 Run: ``python -m benchmarks.scenarios cartpole --seeds 0 1 2``; each run's figures are kept in
 ``benchmarks/figures/scenarios.json`` and the ``scenarios`` section of BENCHMARKS.md is rebuilt from all of them, with
@@ -38,24 +38,22 @@ from stable_baselines3.common.env_util import make_vec_env
 import sb3_mpail.envs  # noqa: F401  (registers the package's envs)
 from benchmarks.report import machine_description, write_section
 from sb3_mpail import MPAIL
-from sb3_mpail.demos import normalised_score
+from sb3_mpail.demos import shipped_demo_info, shipped_demos
 from sb3_mpail.envs.ant import evaluate_ant
 from sb3_mpail.envs.lap import lap_metrics
 from sb3_mpail.envs.maze import point_maze_figures
-from sb3_mpail.evaluation import deterministic_episode_returns
+from sb3_mpail.evaluation import evaluate_episodes, normalised_score
+from sb3_mpail.zoo import HYPERPARAMS
 
-ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "figures" / "scenarios.json"
-ZOO_CONFIG = ROOT / "zoo_configs" / "mpail.yml"
+RESULTS = Path(__file__).resolve().parent / "figures" / "scenarios.json"
 #: how each scenario's settings were chosen, what failed and what is left: written by hand, appended to the section
-NOTES = ROOT / "benchmarks" / "scenarios_notes.md"
+NOTES = Path(__file__).resolve().parent / "scenarios_notes.md"
 EVAL_SEED = 10_000
 
 
 def cartpole_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, float]:
     """Mean return of the deterministic planner and its normalised score."""
-    returns = deterministic_episode_returns(model, "sb3_mpail/ContinuousCartPole-v0", n_episodes, EVAL_SEED, n_episodes)
-    mean_return = float(np.mean(returns))
+    mean_return = evaluate_episodes(model, "sb3_mpail/ContinuousCartPole-v0", n_episodes, EVAL_SEED).mean_return
     return {"return": mean_return, "score": normalised_score(mean_return, stats)}
 
 
@@ -65,8 +63,7 @@ def cartpole_reference(stats: Dict) -> str:
 
 def lap_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, float]:
     """Cross-track error to the demo's recorded path and mean speed of the deterministic planner over the laps."""
-    with np.load(ROOT / "demos" / "lap_1.npz") as demos:
-        path = demos["obs"][0, :, :2]
+    path = shipped_demos("lap", 1)[0].obs[:, :2]
     plan = None
 
     def planner(observation: np.ndarray, episode_start: bool) -> np.ndarray:
@@ -93,19 +90,12 @@ def parking_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, flo
     parked and crashed. The success rate is the figure that says whether it parks: a crash costs only 5 and ends
     the episode, so crashing early returns more than driving around for the 100 s limit.
     """
-    endings: List[Dict] = []
-
-    def record_ending(info: Dict, done: bool) -> None:
-        if done:
-            endings.append(info)
-
-    returns = deterministic_episode_returns(model, "sb3_mpail/Parking-v0", n_episodes, EVAL_SEED, n_episodes, record_ending)
-    mean_return = float(np.mean(returns))
+    episodes = evaluate_episodes(model, "sb3_mpail/Parking-v0", n_episodes, EVAL_SEED)
     return {
-        "return": mean_return,
-        "score": normalised_score(mean_return, stats),
-        "success": float(np.mean([info["is_success"] for info in endings])),
-        "crashed": float(np.mean([info["crashed"] for info in endings])),
+        "return": episodes.mean_return,
+        "score": normalised_score(episodes.mean_return, stats),
+        "success": float(np.mean([info["is_success"] for info in episodes.final_infos])),
+        "crashed": float(np.mean([info["crashed"] for info in episodes.final_infos])),
     }
 
 
@@ -130,8 +120,7 @@ def road_figures(env_id: str, model: MPAIL, stats: Dict, n_episodes: int) -> Dic
         on_road.append(bool(info["rewards"]["on_road_reward"]))
         speeds.append(float(info["speed"]))
 
-    returns = deterministic_episode_returns(model, env_id, n_episodes, EVAL_SEED, n_episodes, record_step)
-    mean_return = float(np.mean(returns))
+    mean_return = evaluate_episodes(model, env_id, n_episodes, EVAL_SEED, on_step=record_step).mean_return
     return {
         "return": mean_return,
         "score": normalised_score(mean_return, stats),
@@ -191,8 +180,8 @@ class Scenario(NamedTuple):
     """
     One benchmark scenario.
 
-    :param env_id: registered env id, also the key of its ``zoo_configs/mpail.yml`` entry
-    :param demo_stats: JSON file beside the demos with the expert's figures
+    :param env_id: registered env id, also the key of its ``sb3_mpail/hyperparams/mpail.yml`` entry
+    :param demos: the shipped demo family, whose information file holds the expert's figures
     :param title: what the BENCHMARKS.md table calls it
     :param figures: ``figures(model, stats, n_episodes)``: the trained model's figures, keyed like ``columns``
     :param columns: ``(key, column title)`` of each figure in the table
@@ -201,7 +190,7 @@ class Scenario(NamedTuple):
     """
 
     env_id: str
-    demo_stats: str
+    demos: str
     title: str
     figures: Callable[[MPAIL, Dict, int], Dict[str, float]]
     columns: Tuple[Tuple[str, str], ...]
@@ -212,7 +201,7 @@ class Scenario(NamedTuple):
 SCENARIOS: Dict[str, Scenario] = {
     "cartpole": Scenario(
         "sb3_mpail/ContinuousCartPole-v0",
-        "demos/cartpole.json",
+        "cartpole",
         "Cartpole, online-learned model (MPAIL-OM)",
         cartpole_figures,
         (("return", "return"), ("score", "normalised score")),
@@ -221,7 +210,7 @@ SCENARIOS: Dict[str, Scenario] = {
     ),
     "lap": Scenario(
         "sb3_mpail/NavigationLap-v0",
-        "demos/lap.json",
+        "lap",
         "One lap from a single noisy demo of position and body-frame velocity",
         lap_figures,
         (("cte_mean", "mean cross-track error (m)"), ("cte_max", "max cross-track error (m)"), ("speed", "speed (m/s)")),
@@ -230,7 +219,7 @@ SCENARIOS: Dict[str, Scenario] = {
     ),
     "parking": Scenario(
         "sb3_mpail/Parking-v0",
-        "demos/parking.json",
+        "parking",
         "highway-env parking-v0 from 4 scripted-expert demos (observations only)",
         parking_figures,
         (("return", "return"), ("score", "normalised score"), ("success", "success rate"), ("crashed", "crash rate")),
@@ -239,7 +228,7 @@ SCENARIOS: Dict[str, Scenario] = {
     ),
     "racetrack": Scenario(
         "sb3_mpail/Racetrack-v0",
-        "demos/racetrack.json",
+        "racetrack",
         "highway-env racetrack-v0 (steering only, no other vehicles) from 4 scripted lane-keeping demos (observations only)",
         partial(road_figures, "sb3_mpail/Racetrack-v0"),
         ROAD_COLUMNS,
@@ -248,7 +237,7 @@ SCENARIOS: Dict[str, Scenario] = {
     ),
     "highway": Scenario(
         "sb3_mpail/Highway-v0",
-        "demos/highway.json",
+        "highway",
         "highway-env highway-v0 (acceleration and steering, no other vehicles) from 4 scripted demos (observations only)",
         partial(road_figures, "sb3_mpail/Highway-v0"),
         (*ROAD_COLUMNS, ("speed", "speed (m/s)")),
@@ -257,7 +246,7 @@ SCENARIOS: Dict[str, Scenario] = {
     ),
     "ant": Scenario(
         "sb3_mpail/Ant-v0",
-        "demos/ant.json",
+        "ant",
         "MuJoCo Ant (27-D observation, 200 steps) with an online-learned model (MPAIL-OM) from 4 PPO demos",
         ant_figures,
         (("return", "return"), ("score", "normalised score"), ("speed", "forward speed (m/s)")),
@@ -266,7 +255,7 @@ SCENARIOS: Dict[str, Scenario] = {
     ),
     "pointmaze": Scenario(
         "sb3_mpail/PointMaze-v0",
-        "demos/pointmaze.json",
+        "pointmaze",
         "gymnasium-robotics PointMaze U-maze through a wall-free point-mass model, from 4 scripted demos (observations only)",
         pointmaze_figures,
         (("return", "return"), ("score", "normalised score"), ("success", "success rate"), ("wall_steps", "steps on a wall")),
@@ -278,12 +267,11 @@ SCENARIOS: Dict[str, Scenario] = {
 
 
 def zoo_hyperparameters(env_id: str) -> Dict:
-    """The scenario's ``zoo_configs/mpail.yml`` entry as ``MPAIL`` arguments, plus ``n_envs`` and ``n_timesteps``."""
-    entry = dict(yaml.safe_load(ZOO_CONFIG.read_text())[env_id])
+    """The scenario's ``sb3_mpail/hyperparams/mpail.yml`` entry as ``MPAIL`` arguments, plus ``n_envs`` and ``n_timesteps``."""
+    entry = dict(yaml.safe_load(HYPERPARAMS.read_text())[env_id])
     if isinstance(entry.get("policy_kwargs"), str):
         entry["policy_kwargs"] = eval(entry["policy_kwargs"], {"dict": dict})  # rl_zoo3's convention: a Python string
     entry.pop("policy")
-    entry["demos"] = ROOT / entry["demos"]
     return entry
 
 
@@ -316,8 +304,9 @@ def summary_table(results: Dict[str, Dict]) -> str:
 def section(results: Dict[str, Dict]) -> str:
     """The ``scenarios`` section of BENCHMARKS.md from every scenario's stored results."""
     parts = [
-        "## Scenarios beyond navigation (issue 5)\n\n"
-        "MPAIL's deterministic planner after training with the scenario's `zoo_configs/mpail.yml` entry, evaluated on "
+        "## Scenarios beyond navigation\n\n"
+        "MPAIL's deterministic planner after training with the scenario's `sb3_mpail/hyperparams/mpail.yml` entry, "
+        "evaluated on "
         "fixed episodes (reset seeds from 10000); normalised score = (return - random) / (expert - random).",
         summary_table(results),
     ]
@@ -334,7 +323,7 @@ def section(results: Dict[str, Dict]) -> str:
             f"""### {scenario.title}: `{scenario.env_id}`
 
 {result['timesteps']} env steps per seed, hyperparameters `{result['hyperparameters']}`; {result['n_eval_episodes']}
-evaluation episodes per seed. {scenario.reference(result['stats'])} (`{scenario.demo_stats}`)
+evaluation episodes per seed. {scenario.reference(result['stats'])} (`sb3_mpail/data/{scenario.demos}.json`)
 
 | seed | {" | ".join(title for _, title in scenario.columns)} | train seconds |
 |---|{"---|" * len(keys)}---|
@@ -342,7 +331,7 @@ evaluation episodes per seed. {scenario.reference(result['stats'])} (`{scenario.
 | mean ± std over {len(runs)} seeds | {summary} | |
 
 Command: `{result['command']}` on {result['machine']}. Zoo equivalent (one seed):
-`python -m sb3_mpail.zoo train --algo mpail --env {SCENARIOS[name].env_id} -conf zoo_configs/mpail.yml`."""
+`python -m sb3_mpail.zoo train --algo mpail --env {SCENARIOS[name].env_id}`."""
         )
     parts.append(NOTES.read_text().strip())
     return "\n\n".join(parts)
@@ -363,7 +352,7 @@ def main() -> None:
         parser.error("name a scenario, or pass --report-only")
     scenario = SCENARIOS[args.scenario]
     th.set_num_threads(args.threads)
-    stats = json.loads((ROOT / scenario.demo_stats).read_text())
+    stats = shipped_demo_info(scenario.demos)
     runs: List[Dict] = []
     for seed in args.seeds:
         runs.append(run_seed(scenario, stats, seed, scenario.n_eval_episodes))

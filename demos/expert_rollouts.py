@@ -1,6 +1,10 @@
 """
 Rollouts shared by the demo scripts: scoring an expert and a random policy, recording an expert's observations and
 saving them with their metadata. Imported by the ``make_*_demos.py`` scripts, which run from this folder.
+
+The demos they write are package data: ``<name>_<n>.npz`` and ``<name>.json`` go to ``sb3_mpail/data/``
+(:data:`SHIPPED_DEMO_DIR`), so a new demo set is shipped by adding its files there; expert-action twins, which only the
+BC baseline reads, go to ``benchmarks/action_demos/`` (:data:`ACTION_DEMO_DIR`).
 """
 
 import json
@@ -10,10 +14,14 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
+
+from sb3_mpail.evaluation import evaluate_episodes
 
 DEMO_SEED_OFFSET = 1000
+#: where the demo scripts write the shipped demos and their information files (the package's data folder)
+SHIPPED_DEMO_DIR = Path(__file__).resolve().parent.parent / "sb3_mpail" / "data"
+#: where the expert-action twins of the demos go (experiment data for the BC baseline, not shipped)
+ACTION_DEMO_DIR = Path(__file__).resolve().parent.parent / "benchmarks" / "action_demos"
 
 
 def evaluate_expert(model: BaseAlgorithm, env_id: str, seed: int, n_episodes: int) -> tuple[float, float]:
@@ -25,10 +33,8 @@ def evaluate_expert(model: BaseAlgorithm, env_id: str, seed: int, n_episodes: in
     :param n_episodes: Number of evaluation episodes.
     :return: Mean and standard deviation of the episode returns.
     """
-    eval_env = make_vec_env(env_id, n_envs=1, seed=seed)
-    mean, std = evaluate_policy(model, eval_env, n_eval_episodes=n_episodes, deterministic=True)
-    eval_env.close()
-    return float(mean), float(std)
+    episodes = evaluate_episodes(model, env_id, n_episodes, seed, n_envs=1)
+    return episodes.mean_return, episodes.std_return
 
 
 def evaluate_random(env_id: str, seed: int, n_episodes: int) -> tuple[float, float]:

@@ -37,7 +37,7 @@ from typing import Any, Optional
 
 import numpy as np
 import torch
-from expert_rollouts import evaluate_random, record_demos, save_demos, save_metadata
+from expert_rollouts import SHIPPED_DEMO_DIR, evaluate_random, record_demos, save_demos, save_metadata
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
@@ -49,7 +49,7 @@ from sb3_mpail.envs.ant import ANT_FORWARD_VELOCITY_INDEX, evaluate_ant
 
 ENV_ID = "sb3_mpail/Ant-v0"
 N_EVAL_EPISODES = 20
-DEFAULT_OUT_DIR = Path(__file__).resolve().parent
+DEFAULT_OUT_DIR = SHIPPED_DEMO_DIR
 
 
 def parse_args() -> argparse.Namespace:

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from expert_rollouts import evaluate_expert, evaluate_random, record_demos, save_demos, save_metadata
+from expert_rollouts import SHIPPED_DEMO_DIR, evaluate_expert, evaluate_random, record_demos, save_demos, save_metadata
 from stable_baselines3 import PPO
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.utils import get_linear_fn, set_random_seed
@@ -39,7 +39,7 @@ import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/ContinuousCartPole-v0)
 
 ENV_ID = "sb3_mpail/ContinuousCartPole-v0"
 N_EVAL_EPISODES = 100
-DEFAULT_OUT_DIR = Path(__file__).resolve().parent
+DEFAULT_OUT_DIR = SHIPPED_DEMO_DIR
 
 
 def parse_args() -> argparse.Namespace:

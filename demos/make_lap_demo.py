@@ -1,5 +1,6 @@
 """
-Record the single noisy, partially observed demo of the lap scenario: ``demos/lap_1.npz`` and ``demos/lap.json``.
+Record the single noisy, partially observed demo of the lap scenario: ``lap_1.npz`` and ``lap.json`` in the
+package's data folder (``sb3_mpail/data/``).
 
 One lap (240 steps) of ``sb3_mpail/NavigationLap-v0`` driven by the scripted pure-pursuit driver
 :func:`sb3_mpail.envs.lap.lap_driver` (the stand-in for the paper's human-driven lap), from ``reset(seed=1000)``.
@@ -15,17 +16,17 @@ error to the recorded path, mean planar speed), the reference for MPAIL's. Run f
 
 import argparse
 import json
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+from expert_rollouts import SHIPPED_DEMO_DIR
 
 from sb3_mpail.envs.lap import DEMO_FEATURES, LAP_STEPS, TRACK_RADIUS, lap_driver, lap_metrics
 
 DEMO_SEED = 1000
 EVAL_SEED = 10_000  # the reset seed of benchmarks/scenarios.py's first evaluation lap
 N_EVAL_LAPS = 5
-OUT_DIR = Path(__file__).resolve().parent
+OUT_DIR = SHIPPED_DEMO_DIR
 
 
 def record(position_noise: float, velocity_noise: float, seed: int) -> np.ndarray:

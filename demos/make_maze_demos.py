@@ -26,13 +26,13 @@ from typing import Any, Dict, Optional, Tuple
 
 import gymnasium as gym
 import numpy as np
-from expert_rollouts import evaluate_random, record_demos, save_demos, save_metadata
+from expert_rollouts import SHIPPED_DEMO_DIR, evaluate_random, record_demos, save_demos, save_metadata
 
 from sb3_mpail.envs.maze import POINT_MAZE_ID, point_maze_figures
 
 ENV_ID = POINT_MAZE_ID
 N_EVAL_EPISODES = 100
-DEFAULT_OUT_DIR = Path(__file__).resolve().parent
+DEFAULT_OUT_DIR = SHIPPED_DEMO_DIR
 
 
 class MazeGraphExpert:

@@ -1,8 +1,10 @@
 """Train a PPO expert on ``sb3_mpail/Navigation-v0`` and record observation-only demonstrations.
 
 Writes ``navigation_{1,4,16}.npz`` (``obs`` of shape ``(n_demos, 101, 12)``, float32) and ``navigation.json``
-(expert and random-policy returns, training settings) to ``--out-dir``. The expert model is saved outside the
-repository (``--model-path``). Usage::
+(expert and random-policy returns, training settings) to ``--out-dir`` (the package's ``sb3_mpail/data/``, so they
+ship), and their expert-action twins ``navigation_{1,4,16}_actions.npz`` (for the BC baseline only) to
+``--actions-dir`` (``benchmarks/action_demos/``). The expert model is saved outside the repository (``--model-path``).
+Usage::
 
     python demos/make_navigation_demos.py
     python demos/make_navigation_demos.py --min-speed 1.0 --name navigation_circling   # an expert that cannot stop
@@ -21,6 +23,7 @@ from collections.abc import Callable
 import gymnasium as gym
 import numpy as np
 import torch
+from expert_rollouts import ACTION_DEMO_DIR, SHIPPED_DEMO_DIR
 from gymnasium import spaces
 from stable_baselines3 import PPO
 from stable_baselines3.common.env_util import make_vec_env
@@ -188,7 +191,8 @@ def main() -> None:
     parser.add_argument("--timesteps", type=int, default=300_000, help="PPO training steps")
     parser.add_argument("--seed", type=int, default=0, help="training seed")
     parser.add_argument("--n-envs", type=int, default=4, help="vectorised training environments")
-    parser.add_argument("--out-dir", default="demos", help="where the .npz demos and navigation.json go")
+    parser.add_argument("--out-dir", default=str(SHIPPED_DEMO_DIR), help="where the .npz demos and <name>.json go")
+    parser.add_argument("--actions-dir", default=str(ACTION_DEMO_DIR), help="where the expert-action twins go")
     parser.add_argument("--model-path", default=None, help="expert model (default /tmp/<name>_expert_ppo.zip)")
     parser.add_argument("--min-speed", type=float, default=None, help="lowest target speed of the expert (m/s)")
     parser.add_argument("--name", default="navigation", help="file names: <name>_<n>.npz and <name>.json")
@@ -210,10 +214,11 @@ def main() -> None:
     demo_obs = np.stack([obs for obs, _, _ in demos]).astype(np.float32)
     demo_actions = np.stack([actions for _, actions, _ in demos])
     os.makedirs(args.out_dir, exist_ok=True)
+    os.makedirs(args.actions_dir, exist_ok=True)
     for n_demos in DEMO_COUNTS:
         # Nested subsets: the first n of the 16 demonstrations; the action-labelled twins are for BC only.
         np.savez_compressed(os.path.join(args.out_dir, f"{args.name}_{n_demos}.npz"), obs=demo_obs[:n_demos])
-        labelled = os.path.join(args.out_dir, f"{args.name}_{n_demos}_actions.npz")
+        labelled = os.path.join(args.actions_dir, f"{args.name}_{n_demos}_actions.npz")
         np.savez_compressed(labelled, obs=demo_obs[:n_demos], acts=demo_actions[:n_demos])
 
     summary = {

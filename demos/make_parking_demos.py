@@ -27,6 +27,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import torch as th
+from expert_rollouts import SHIPPED_DEMO_DIR
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Parking-v0)
 from sb3_mpail.mppi import ParkingKinematics
@@ -111,7 +112,7 @@ def main() -> None:
     parser.add_argument("--noise", type=float, default=0.5)
     parser.add_argument("--temperature", type=float, default=0.1)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out-dir", type=Path, default=Path(__file__).resolve().parent)
+    parser.add_argument("--out-dir", type=Path, default=SHIPPED_DEMO_DIR)
     args = parser.parse_args()
     th.set_num_threads(1)
     env = gym.make(ENV_ID)

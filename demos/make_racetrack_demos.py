@@ -29,12 +29,12 @@ from typing import Any, NamedTuple, Optional
 
 import gymnasium as gym
 import numpy as np
-from expert_rollouts import evaluate_expert, evaluate_random, record_demos, save_demos, save_metadata
+from expert_rollouts import SHIPPED_DEMO_DIR, evaluate_expert, evaluate_random, record_demos, save_demos, save_metadata
 
 import sb3_mpail.envs  # noqa: F401  (registers the road scenarios)
 from sb3_mpail.envs.highway_roads import EGO_SCALES
 
-DEFAULT_OUT_DIR = Path(__file__).resolve().parent
+DEFAULT_OUT_DIR = SHIPPED_DEMO_DIR
 MAX_STEERING = np.pi / 4  # highway-env's steering for an action of 1
 MAX_ACCELERATION = 5.0  # and its acceleration
 

@@ -1,23 +1,37 @@
 """
-Observation-only expert demonstrations: load them from any of the formats users have, as ``(s, s')`` pairs.
+Observation-only expert demonstrations: load them from any of the formats users have, as ``(s, s')`` pairs, and the
+demo sets shipped with the package.
 
-Accepted: a sequence of imitation ``Trajectory`` objects, imitation ``Transitions``, an ``.npz`` file, or a
-directory written by ``imitation.data.serialize.save``. Only observations are read; expert actions are never
-needed. An ``.npz`` file holds ``obs`` of shape ``(n_demos, T + 1, obs_dim)`` (equal-length episodes), or ``obs``
-of shape ``(sum of T_i + 1, obs_dim)`` with ``episode_lengths`` giving each episode's ``T_i + 1`` observations.
+Accepted: a sequence of imitation ``Trajectory`` objects, imitation ``Transitions``, an ``.npz`` file, a directory
+written by ``imitation.data.serialize.save``, or the name of a shipped demo set (``"pendulum_4"``, see
+:func:`list_shipped_demos`). Only observations are read; expert actions are never needed. An ``.npz`` file holds
+``obs`` of shape ``(n_demos, T + 1, obs_dim)`` (equal-length episodes), or ``obs`` of shape
+``(sum of T_i + 1, obs_dim)`` with ``episode_lengths`` giving each episode's ``T_i + 1`` observations.
+
+The shipped demo sets are package data: ``<name>_<n>.npz`` holds ``n`` expert episodes and ``<name>.json`` the
+expert's and a random policy's returns (the normalised score's 1 and 0, see
+:func:`~sb3_mpail.evaluation.normalised_score`) and how the demos were made. Dropping such a pair of files into the
+package's ``data`` folder ships a new set.
 """
 
+import json
 import os
+import re
 import zipfile
 import zlib
 from pathlib import Path
-from typing import Any, Dict, List, NamedTuple, Sequence, Union
+from typing import Any, Dict, List, NamedTuple, Sequence, Tuple, Union
 
 import numpy as np
 from gymnasium import spaces
 from imitation.data.types import Trajectory, Transitions
 
 DemoSource = Union[str, os.PathLike, Sequence[Trajectory], Transitions]
+
+#: the shipped demo sets and their information files (package data)
+SHIPPED_DEMO_DIR = Path(__file__).resolve().parent / "data"
+#: a shipped demo set's name: the demos' family (its information file's name) and the number of episodes
+_DEMO_SET_NAME = re.compile(r"^(?P<family>.+)_(?P<n_demos>\d+)$")
 
 
 class ExpertTransitions(NamedTuple):
@@ -97,19 +111,79 @@ def _episodes_from_npz(path: Path) -> List[np.ndarray]:
     return list(observations)
 
 
+def _demo_set_order(name: str) -> Tuple[str, int]:
+    match = _DEMO_SET_NAME.match(name)
+    return (name, -1) if match is None else (match["family"], int(match["n_demos"]))
+
+
+def list_shipped_demos() -> List[str]:
+    """
+    The names of the shipped demo sets, ``<family>_<n_demos>`` (e.g. ``"pendulum_4"``), by family and size: what
+    :func:`shipped_demos`, :func:`load_demos`, :class:`~sb3_mpail.MPAIL` and a zoo file's ``demos:`` accept.
+    """
+    return sorted((path.stem for path in SHIPPED_DEMO_DIR.glob("*.npz")), key=_demo_set_order)
+
+
+def _shipped_demo_path(name: str) -> Path:
+    path = SHIPPED_DEMO_DIR / f"{name}.npz"
+    if not path.is_file():
+        shipped = ", ".join(list_shipped_demos())
+        raise FileNotFoundError(f"No shipped demo set is named {name!r}; the shipped ones are {shipped}.")
+    return path
+
+
+def shipped_demos(name: str, n_demos: int) -> List[Trajectory]:
+    """
+    A shipped demo set as imitation ``Trajectory`` objects, ready for ``MPAIL(..., demos=...)``.
+
+    The trajectories hold the expert's observations only: their ``acts`` have zero width, ``(T, 0)``, since the demos
+    hold no actions (BC-style learners that need them cannot use these).
+
+    :param name: the demos' family, e.g. ``"pendulum"`` or ``"navigation"``
+    :param n_demos: how many episodes the set holds (``list_shipped_demos()`` names the sets, ``<name>_<n_demos>``)
+    :raises FileNotFoundError: no such set is shipped (the message lists those that are)
+    """
+    episodes = _episodes_from_npz(_shipped_demo_path(f"{name}_{n_demos}"))
+    return [
+        Trajectory(obs=episode, acts=np.zeros((len(episode) - 1, 0), np.float32), infos=None, terminal=True)
+        for episode in episodes
+    ]
+
+
+def shipped_demo_info(name: str) -> Dict[str, Any]:
+    """
+    A shipped demo family's information file: the expert's and a random policy's mean returns
+    (``expert_return_mean``, ``random_return_mean``, the normalised score's reference), the expert and the command
+    that made the demos.
+
+    :param name: the demos' family, e.g. ``"navigation"``
+    :raises FileNotFoundError: no such family is shipped (the message lists those that are)
+    """
+    path = SHIPPED_DEMO_DIR / f"{name}.json"
+    if not path.is_file():
+        families = sorted(info.stem for info in SHIPPED_DEMO_DIR.glob("*.json"))
+        raise FileNotFoundError(f"No shipped demo family is named {name!r}; the shipped ones are {', '.join(families)}.")
+    return json.loads(path.read_text())
+
+
 def load_demo_episodes(demos: DemoSource) -> List[np.ndarray]:
     """
     The demos' episodes as observation arrays, ``(T_i + 1, obs_dim)`` each.
 
-    :param demos: trajectories, an ``.npz`` path or an imitation ``serialize`` directory (not ``Transitions``, which
-        hold no episode boundaries)
-    :raises FileNotFoundError: the path does not exist
+    :param demos: trajectories, an ``.npz`` path, an imitation ``serialize`` directory or the name of a shipped demo
+        set (not ``Transitions``, which hold no episode boundaries); an existing path wins over a shipped name
+    :raises FileNotFoundError: the path does not exist and no shipped demo set has that name
     :raises ValueError: the file cannot be read, or there are no episodes, or an episode has fewer than two observations
     """
     if isinstance(demos, (str, os.PathLike)):
         path = Path(demos)
         if not path.exists():
-            raise FileNotFoundError(f"Demo path {path} does not exist.")
+            if str(demos) not in list_shipped_demos():
+                raise FileNotFoundError(
+                    f"Demo path {path} does not exist, and it is not the name of a shipped demo set "
+                    f"({', '.join(list_shipped_demos())})."
+                )
+            path = SHIPPED_DEMO_DIR / f"{demos}.npz"
         if path.is_dir():
             from imitation.data import serialize
 
@@ -129,11 +203,12 @@ def load_demos(
     """
     Reads expert observations and checks them against the environment's observation space.
 
-    :param demos: trajectories, transitions, an ``.npz`` path or an imitation ``serialize`` directory
+    :param demos: trajectories, transitions, an ``.npz`` path, an imitation ``serialize`` directory or the name of a
+        shipped demo set (:func:`list_shipped_demos`)
     :param observation_space: the environment's observation space (or the space the demos must have)
     :param space_name: how error messages name that space
     :return: the expert's ``(s, s')`` pairs
-    :raises FileNotFoundError: the path does not exist
+    :raises FileNotFoundError: the path does not exist and no shipped demo set has that name
     :raises ValueError: shapes differ from the observation space, values are not finite, or the data is empty
     """
     if isinstance(demos, Transitions):
@@ -153,14 +228,3 @@ def load_demos(
             raise ValueError(f"Demo {name} contain NaN or infinite values (in {len(rows)} transitions, first at {rows[0]}).")
     return transitions
 
-
-def normalised_score(episode_return: float, reference: Dict[str, Any]) -> float:
-    """
-    ``(R - random) / (expert - random)``: 0 is the random policy, 1 the expert.
-
-    :param episode_return: an undiscounted (mean) episode return ``R``
-    :param reference: a demos information file's contents (``demos/<env>.json``), with ``random_return_mean`` and
-        ``expert_return_mean``
-    """
-    random_return, expert_return = reference["random_return_mean"], reference["expert_return_mean"]
-    return float((episode_return - random_return) / (expert_return - random_return))

@@ -4,6 +4,7 @@ Train MPAIL on ``sb3_mpail/Navigation-v0`` from observation-only demos, evaluate
 Usage::
 
     python -m sb3_mpail.train_navigation                      # CPU defaults (a few minutes on 2 cores)
+    sb3-mpail-train-navigation                                # the same, as the installed console script
     python -m sb3_mpail.train_navigation --device cuda        # the paper's N512/H10/J5, 64 envs, 1M steps
     python -m sb3_mpail.train_navigation --n-samples 64 --timesteps 20000 --out-dir runs/quick
 
@@ -23,16 +24,17 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
-from sb3_mpail.demos import normalised_score
+from sb3_mpail.demos import DemoSource, load_demo_episodes, shipped_demo_info
+from sb3_mpail.evaluation import evaluate_episodes, normalised_score, reference_returns
 from sb3_mpail.mpail import MPAIL
 
 ENV_ID = "sb3_mpail/Navigation-v0"
-REPO_ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_DEMOS = REPO_ROOT / "demos" / "navigation_4.npz"
-DEMO_INFO = REPO_ROOT / "demos" / "navigation.json"
+#: the shipped demo set trained on by default (1 and 16 demos are shipped too)
+DEFAULT_DEMOS = "navigation_4"
+#: the shipped demo family whose expert and random returns the normalised score is measured against
+REFERENCE = "navigation"
 #: evaluation envs are seeded from ``seed + EVAL_SEED_OFFSET`` so they never replay the training starts
 EVAL_SEED_OFFSET = 10_000
 
@@ -63,29 +65,8 @@ ALGORITHM_OPTIONS = {
 }
 
 
-def demo_reference_returns(path: Path = DEMO_INFO) -> Tuple[float, float]:
-    """
-    The random policy's and the expert's mean returns, from ``demos/navigation.json``.
-
-    :param path: the demos' information file
-    :return: ``(random return, expert return)``
-    """
-    info = json.loads(Path(path).read_text())
-    return float(info["random_return_mean"]), float(info["expert_return_mean"])
-
-
-def normalized_score(episode_return: float, info_path: Path = DEMO_INFO) -> float:
-    """
-    ``(R - random) / (expert - random)``: 0 is the random policy, 1 the expert.
-
-    :param episode_return: a (mean) episode return ``R``
-    :param info_path: the demos' information file holding the random and expert returns
-    """
-    return normalised_score(episode_return, json.loads(Path(info_path).read_text()))
-
-
 def make_model(
-    demos: str | Path = DEFAULT_DEMOS,
+    demos: DemoSource = DEFAULT_DEMOS,
     n_envs: int = DEFAULT_N_ENVS,
     seed: int = 0,
     device: str = "cpu",
@@ -96,7 +77,8 @@ def make_model(
     """
     An untrained MPAIL model on ``n_envs`` navigation envs with this module's defaults, overridden by the arguments.
 
-    :param demos: observation-only demos (``.npz`` or any source :func:`~sb3_mpail.demos.load_demos` reads)
+    :param demos: observation-only demos: a shipped demo set's name, an ``.npz`` or any source
+        :func:`~sb3_mpail.demos.load_demos` reads
     :param n_envs: parallel training envs
     :param seed: seed of the envs, networks and planner noise
     :param device: ``"cpu"``, ``"cuda"`` or ``"auto"``
@@ -107,7 +89,7 @@ def make_model(
     return MPAIL(
         "MlpMPPI",
         env,
-        str(demos),
+        demos,
         policy_kwargs={**DEFAULT_POLICY_KWARGS, **(policy_kwargs or {})},
         seed=seed,
         device=device,
@@ -130,40 +112,22 @@ def run_episodes(
     :return: episode returns ``(n,)``, final distances to the goal ``(n,)`` and each episode's observations
         ``(T + 1, 12)``
     """
-    env = make_vec_env(ENV_ID, n_envs=n_episodes, seed=seed, env_kwargs=dict(start_region=start_region))
-    observations = env.reset()
-    trajectories: List[List[np.ndarray]] = [[obs] for obs in observations]
-    returns = np.zeros(n_episodes)
-    finished = np.zeros(n_episodes, dtype=bool)
-    final_distance = np.zeros(n_episodes)
-    plan, starts = None, np.ones(n_episodes, dtype=bool)
-    while not finished.all():
-        actions, plan = model.predict(observations, state=plan, episode_start=starts, deterministic=deterministic)
-        observations, rewards, dones, infos = env.step(actions)
-        for index in np.flatnonzero(~finished):
-            returns[index] += rewards[index]
-            last = infos[index]["terminal_observation"] if dones[index] else observations[index]
-            trajectories[index].append(last)
-            if dones[index]:
-                finished[index] = True
-                final_distance[index] = infos[index]["distance_to_goal"]
-        starts = dones
-    env.close()
-    return returns, final_distance, [np.stack(t) for t in trajectories]
+    episodes = evaluate_episodes(model, ENV_ID, n_episodes, seed, env_kwargs=dict(start_region=start_region),
+                                 deterministic=deterministic, record_observations=True)  # fmt: skip
+    final_distance = np.array([info["distance_to_goal"] for info in episodes.final_infos])
+    return episodes.returns, final_distance, episodes.observations
 
 
 def evaluate(model: MPAIL, n_episodes: int = 10, seed: int = EVAL_SEED_OFFSET) -> Tuple[float, float]:
     """
-    Mean and std of the deterministic planner's return over ``n_episodes`` (SB3's ``evaluate_policy``).
+    Mean and std of the deterministic planner's return over ``n_episodes``, on up to 10 envs at once.
 
     :param model: the model to evaluate
     :param n_episodes: evaluation episodes
     :param seed: seed of the evaluation envs' start draws
     """
-    env = make_vec_env(ENV_ID, n_envs=min(n_episodes, 10), seed=seed)
-    mean_return, std_return = evaluate_policy(model, env, n_eval_episodes=n_episodes, deterministic=True)
-    env.close()
-    return float(mean_return), float(std_return)
+    episodes = evaluate_episodes(model, ENV_ID, n_episodes, seed, n_envs=min(n_episodes, 10))
+    return episodes.mean_return, episodes.std_return
 
 
 class LearningCurveCallback(BaseCallback):
@@ -185,6 +149,7 @@ class LearningCurveCallback(BaseCallback):
         self.eval_seed = seed
         self.curve: List[Tuple[int, float, float]] = []
         self.eval_seconds = 0.0
+        self.reference = shipped_demo_info(REFERENCE)
         self._next = eval_freq
 
     def _on_step(self) -> bool:
@@ -200,9 +165,10 @@ class LearningCurveCallback(BaseCallback):
         started = time.perf_counter()
         mean_return, _ = evaluate(self.model, self.n_eval_episodes, self.eval_seed)
         self.eval_seconds += time.perf_counter() - started
-        self.curve.append((int(self.num_timesteps), mean_return, normalized_score(mean_return)))
+        score = normalised_score(mean_return, self.reference)
+        self.curve.append((int(self.num_timesteps), mean_return, score))
         if self.verbose:
-            print(f"[eval] {self.num_timesteps} steps: return {mean_return:.1f}, score {normalized_score(mean_return):.3f}")
+            print(f"[eval] {self.num_timesteps} steps: return {mean_return:.1f}, score {score:.3f}")
 
 
 def _has_progress_bar_dependencies() -> bool:
@@ -225,7 +191,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         description="Train MPAIL on sb3_mpail/Navigation-v0 from observation-only demos, evaluate, save and plot.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument("--demos", default=str(DEFAULT_DEMOS.relative_to(REPO_ROOT)), help="observation-only demos (.npz)")
+    parser.add_argument(
+        "--demos", default=DEFAULT_DEMOS, help="observation-only demos: a shipped demo set's name or a demo file (.npz)"
+    )
     parser.add_argument(
         "--timesteps", type=int, default=None, help=f"env steps (default {DEFAULT_TIMESTEPS}; paper {PAPER_TIMESTEPS})"
     )
@@ -296,9 +264,7 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     settings = settings_from_args(args)
     out_dir = Path(args.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    demos = Path(args.demos)
-    if not demos.exists() and (REPO_ROOT / demos).exists():
-        demos = REPO_ROOT / demos
+    demos = args.demos
     progress_bar = not args.no_progress_bar and _has_progress_bar_dependencies()
     if not args.no_progress_bar and not progress_bar:
         print("(no progress bar: it needs tqdm and rich, e.g. pip install tqdm rich)")
@@ -327,13 +293,14 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     model.save(model_path)
 
     mean_return, std_return = evaluate(model, args.n_eval_episodes, seed=args.seed + EVAL_SEED_OFFSET)
-    score = normalized_score(mean_return)
+    reference = shipped_demo_info(REFERENCE)
+    score = normalised_score(mean_return, reference)
     if callback is not None:
         # the curve ends with this evaluation of the final model (one taken before the last update is replaced)
         if callback.curve and callback.curve[-1][0] == model.num_timesteps:
             callback.curve.pop()
         callback.curve.append((int(model.num_timesteps), mean_return, score))
-    random_return, expert_return = demo_reference_returns()
+    random_return, expert_return = reference_returns(reference)
     print(
         f"deterministic planner over {args.n_eval_episodes} episodes: return {mean_return:.1f} +- {std_return:.1f} "
         f"(expert {expert_return:.1f}, random {random_return:.1f}), normalised score {score:.3f}"
@@ -356,15 +323,14 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     if not args.no_plot and args.n_plot_episodes > 0:
         from sb3_mpail.plotting import plot_navigation
 
-        with np.load(demos) as data:
-            demo_observations = data["obs"]
+        demo_observations = np.stack(load_demo_episodes(demos))
         _, distances, trajectories = run_episodes(model, args.n_plot_episodes, seed=args.seed + EVAL_SEED_OFFSET)
         figure = plot_navigation(
             model,
             demo_observations,
             trajectories,
             out_dir / "navigation.png",
-            title=f"MPAIL on Navigation-v0 ({demos.name}, {settings['timesteps']} steps, seed {args.seed}): "
+            title=f"MPAIL on Navigation-v0 ({Path(demos).name}, {settings['timesteps']} steps, seed {args.seed}): "
             f"return {mean_return:.0f}, normalised score {score:.2f}",
         )
         results["figure"] = str(figure)

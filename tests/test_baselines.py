@@ -7,15 +7,15 @@ import pytest
 import torch as th
 import yaml
 
-from sb3_mpail.baselines import (
+from benchmarks.baselines import (
+    ACTION_DEMO_DIR,
     ALGOS,
-    CONFIG_DIR,
-    DEMO_DIR,
     META_KEYS,
     FeatureSelectingRewardNet,
+    action_demos_path,
     action_transitions,
     cartpole_actions,
-    evaluate,
+    config_path,
     load_config,
     make_action_demos,
     make_adversarial,
@@ -23,6 +23,8 @@ from sb3_mpail.baselines import (
     pendulum_actions,
     train_baseline,
 )
+from sb3_mpail.demos import list_shipped_demos, shipped_demos
+from sb3_mpail.evaluation import evaluate_episodes
 from sb3_mpail.mppi.dynamics import PendulumDynamics
 
 ENVS = ("Pendulum-v1", "sb3_mpail/Navigation-v0")
@@ -38,10 +40,10 @@ TINY = {
 
 
 def tiny_configs(directory: Path) -> Path:
-    """zoo_configs/ with every entry shrunk by :data:`TINY`."""
+    """Every algorithm's hyperparameter file in ``directory``, every entry shrunk by :data:`TINY`."""
     directory.mkdir(parents=True, exist_ok=True)
     for algo in ALGOS:
-        entries = yaml.safe_load((CONFIG_DIR / f"{algo}.yml").read_text())
+        entries = yaml.safe_load(config_path(algo).read_text())
         for entry in entries.values():
             entry.update(TINY[algo])
         (directory / f"{algo}.yml").write_text(yaml.safe_dump(entries))
@@ -54,7 +56,7 @@ def test_every_config_has_the_zoo_keys_and_mpail_s_budget(algo, env_id):
     entry = load_config(algo, env_id)
     assert {"n_timesteps", "n_envs", "policy", "policy_kwargs", "demos"} <= set(entry)
     assert isinstance(entry["policy_kwargs"], dict)  # a string in the file, evaluated as rl_zoo3 does
-    assert (CONFIG_DIR.parent / entry["demos"]).exists()
+    assert entry["demos"] in list_shipped_demos()
     mpail = load_config("mpail", env_id)
     if algo != "bc":  # BC takes no env steps
         assert entry["n_timesteps"] == mpail["n_timesteps"] and entry["demos"] == mpail["demos"]
@@ -97,25 +99,28 @@ def test_cartpole_actions_invert_the_exact_dynamics():
     assert load_config("bc", CARTPOLE)["demos"] == load_config("mpail", CARTPOLE)["demos"]
 
 
-def test_shipped_action_demos_match_the_observation_only_demos(tmp_path):
-    for path in [path for name in ("navigation", "pendulum", "cartpole") for path in DEMO_DIR.glob(f"{name}_*_actions.npz")]:
-        with np.load(path) as labelled, np.load(path.with_name(path.name.replace("_actions", ""))) as shipped:
-            np.testing.assert_array_equal(labelled["obs"], shipped["obs"])
+def test_action_demos_match_the_shipped_observation_only_demos(tmp_path):
+    labelled_sets = [name for name in list_shipped_demos() if action_demos_path(name).exists()]
+    assert {"navigation_1", "navigation_4", "navigation_16", "pendulum_4", "cartpole_4"} <= set(labelled_sets)
+    for name in labelled_sets:
+        family, n_demos = name.rsplit("_", 1)
+        with np.load(action_demos_path(name)) as labelled:
+            shipped = np.stack([trajectory.obs for trajectory in shipped_demos(family, int(n_demos))])
+            np.testing.assert_array_equal(labelled["obs"], shipped)
             assert labelled["acts"].shape[:2] == (labelled["obs"].shape[0], labelled["obs"].shape[1] - 1)
     for env in ("pendulum", "cartpole"):  # their labels need no expert: remade from the demos
-        for name in (f"{env}_4.npz", f"{env}.json"):
-            (tmp_path / name).write_bytes((DEMO_DIR / name).read_bytes())
         (written,) = make_action_demos(env, out_dir=tmp_path)
-        np.testing.assert_allclose(np.load(written)["acts"], np.load(DEMO_DIR / f"{env}_4_actions.npz")["acts"])
-    transitions = action_transitions(DEMO_DIR / "navigation_4.npz")
+        assert written == tmp_path / f"{env}_4_actions.npz"
+        np.testing.assert_allclose(np.load(written)["acts"], np.load(ACTION_DEMO_DIR / f"{env}_4_actions.npz")["acts"])
+    transitions = action_transitions("navigation_4")
     assert len(transitions) == 400 and np.abs(transitions.acts).sum() > 0
 
 
 def test_observation_only_transitions_pair_consecutive_states():
     from stable_baselines3.common.env_util import make_vec_env
 
-    transitions = observation_only_transitions(DEMO_DIR / "navigation_1.npz", make_vec_env("sb3_mpail/Navigation-v0", 1))
-    obs = np.load(DEMO_DIR / "navigation_1.npz")["obs"][0]
+    transitions = observation_only_transitions("navigation_1", make_vec_env("sb3_mpail/Navigation-v0", 1))
+    obs = shipped_demos("navigation", 1)[0].obs
     np.testing.assert_array_equal(transitions.obs, obs[:-1])
     np.testing.assert_array_equal(transitions.next_obs, obs[1:])
     assert not transitions.acts.any()
@@ -130,9 +135,9 @@ def test_each_baseline_trains_one_tiny_round_and_plans_or_acts(algo, tmp_path):
     def on_eval(steps, found):
         evaluations.append((steps, sorted(found)))
 
-    predictor = train_baseline(algo, "pendulum", DEMO_DIR / "pendulum_4.npz", 0, hyperparams, 32, on_eval, timesteps=64)
-    trajectories = evaluate(predictor, "Pendulum-v1", 2, seed=0)
-    assert len(trajectories) == 2 and all(len(t.acts) == 200 for t in trajectories)
+    predictor = train_baseline(algo, "pendulum", "pendulum_4", 0, hyperparams, 32, on_eval, timesteps=64)
+    episodes = evaluate_episodes(predictor, "Pendulum-v1", 2, seed=0)
+    assert episodes.lengths.tolist() == [200, 200] and np.all(np.isfinite(episodes.returns))
     if algo == "bc":
         assert evaluations == [(0, ["bc"])]
     else:
@@ -144,7 +149,7 @@ def test_adversarial_runs_are_reproducible_from_the_seed(tmp_path):
     configs = tiny_configs(tmp_path)
     runs = {}
     for algo in ("gail", "airl", "gail"):
-        model = train_baseline(algo, "Pendulum-v1", DEMO_DIR / "pendulum_4.npz", 3, load_config(algo, "Pendulum-v1", configs))
+        model = train_baseline(algo, "Pendulum-v1", "pendulum_4", 3, load_config(algo, "Pendulum-v1", configs))
         runs.setdefault(algo, []).append(th.cat([p.detach().flatten() for p in model.policy.parameters()]))
     assert th.equal(runs["gail"][0], runs["gail"][1])
     assert not th.equal(runs["gail"][0], runs["airl"][0])
@@ -157,7 +162,7 @@ def test_mpail_s_last_evaluation_sees_the_model_after_its_last_update(tmp_path):
     def on_eval(steps, found):
         evaluated_values.append([p.detach().clone() for p in found["mpail"].policy.value_net.parameters()])
 
-    model = train_baseline("mpail", "pendulum", DEMO_DIR / "pendulum_4.npz", 0, hyperparams, 32, on_eval, timesteps=64)
+    model = train_baseline("mpail", "pendulum", "pendulum_4", 0, hyperparams, 32, on_eval, timesteps=64)
     final_values = list(model.policy.value_net.parameters())
     assert all(th.equal(evaluated, final) for evaluated, final in zip(evaluated_values[-1], final_values))
 
@@ -190,8 +195,8 @@ def test_feature_selecting_discriminator_reads_only_its_features():
 def test_feature_demos_are_written_at_their_indices_of_zero_states():
     from stable_baselines3.common.env_util import make_vec_env
 
-    transitions = observation_only_transitions(DEMO_DIR / "lap_1.npz", make_vec_env(LAP, 1), [0, 1, 6, 7])
-    features = np.load(DEMO_DIR / "lap_1.npz")["obs"][0]
+    transitions = observation_only_transitions("lap_1", make_vec_env(LAP, 1), [0, 1, 6, 7])
+    features = shipped_demos("lap", 1)[0].obs
     assert transitions.obs.shape == (len(features) - 1, 12)
     np.testing.assert_array_equal(transitions.obs[:, [0, 1, 6, 7]], features[:-1])
     np.testing.assert_array_equal(transitions.next_obs[:, [0, 1, 6, 7]], features[1:])
@@ -204,17 +209,17 @@ def test_only_gail_reads_feature_demos():
     hyperparams = {k: v for k, v in load_config("gail", LAP).items() if k not in META_KEYS}
     env = make_vec_env(LAP, 1)
     with pytest.raises(ValueError, match="Only GAIL"):
-        make_adversarial("airl", env, DEMO_DIR / "lap_1.npz", 0, hyperparams)
+        make_adversarial("airl", env, "lap_1", 0, hyperparams)
     with pytest.raises(ValueError, match="needs reward_net_kwargs features"):
-        make_adversarial("gail", env, DEMO_DIR / "lap_1.npz", 0, {**hyperparams, "reward_net_kwargs": {}})
+        make_adversarial("gail", env, "lap_1", 0, {**hyperparams, "reward_net_kwargs": {}})
 
 
 @pytest.mark.parametrize(
     "algo, env_id, demos",
-    [("gail", CARTPOLE, "cartpole_4.npz"), ("airl", CARTPOLE, "cartpole_4.npz"), ("gail", LAP, "lap_1.npz")],
+    [("gail", CARTPOLE, "cartpole_4"), ("airl", CARTPOLE, "cartpole_4"), ("gail", LAP, "lap_1")],
 )
 def test_cartpole_s_falling_episodes_and_the_lap_s_feature_demos_train(algo, env_id, demos, tmp_path):
     # a barely trained cartpole generator falls within 64 steps: imitation refuses that unless the config allows it
     hyperparams = load_config(algo, env_id, tiny_configs(tmp_path))
-    model = train_baseline(algo, env_id, DEMO_DIR / demos, 0, hyperparams, timesteps=64)
-    assert model.num_timesteps == 64 and len(evaluate(model, env_id, 1, seed=0)) >= 1
+    model = train_baseline(algo, env_id, demos, 0, hyperparams, timesteps=64)
+    assert model.num_timesteps == 64 and len(evaluate_episodes(model, env_id, 1, seed=0).returns) == 1

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from test_baselines import tiny_configs
 
-from sb3_mpail import benchmark
-from sb3_mpail.baselines import DEMO_DIR
-from sb3_mpail.benchmark import main, make_jobs, mean_ci, steps_summary
-from sb3_mpail.demos import normalised_score
+from benchmarks import runner
+from benchmarks.runner import main, make_jobs, mean_ci, steps_summary
+from sb3_mpail.demos import shipped_demo_info
+from sb3_mpail.evaluation import normalised_score
 
 
 def test_gail_and_irl_mpc_share_a_run_and_seeds_come_first():
@@ -57,7 +57,7 @@ def test_a_second_invocation_trains_nothing(tmp_path, monkeypatch, capsys):
     def refuse(*args, **kwargs):
         raise AssertionError("a finished run was trained again")
 
-    monkeypatch.setattr(benchmark, "train_baseline", refuse)
+    monkeypatch.setattr(runner, "train_baseline", refuse)
     main(arguments)
     assert "0 runs to do" in capsys.readouterr().out
     assert (results / "pendulum" / "bc_4demos_seed0.json").read_text() == before
@@ -86,7 +86,7 @@ def test_ray_is_optional_and_named_when_missing(tmp_path, monkeypatch):
     monkeypatch.setattr(builtins, "__import__", no_ray)
     job = dict(env_id="Pendulum-v1", algos=("bc",), n_demos=4, seed=0)
     with pytest.raises(SystemExit, match="pip install"):
-        benchmark.run_grid([job], dict(results_dir=tmp_path, threads=1), ray_address="auto")
+        runner.run_grid([job], dict(results_dir=tmp_path, threads=1), ray_address="auto")
 
 
 def test_cartpole_runs_are_scored_against_its_expert_and_random_returns(tmp_path):
@@ -95,7 +95,7 @@ def test_cartpole_runs_are_scored_against_its_expert_and_random_returns(tmp_path
           str(tiny_configs(tmp_path / "configs")), "--results-dir", str(results), "--report-file", str(report),
           "--figures-dir", str(tmp_path / "figures"), "--eval-episodes", "2"])  # fmt: skip
     gail = json.loads((results / "cartpole" / "gail_4demos_seed0.json").read_text())
-    stats = json.loads((DEMO_DIR / "cartpole.json").read_text())
+    stats = shipped_demo_info("cartpole")
     assert gail["final_score"] == pytest.approx(normalised_score(gail["final_return"], stats))
     assert "## Baselines on sb3_mpail/ContinuousCartPole-v0" in report.read_text()
 
@@ -106,7 +106,7 @@ def test_lap_runs_are_measured_by_cross_track_error_beside_mpail_s_scenario_runs
     scenarios.write_text(
         json.dumps(dict(lap=dict(runs=mpail_runs, timesteps=144000, command="python -m benchmarks.scenarios lap")))
     )
-    monkeypatch.setattr(benchmark, "SCENARIO_RESULTS", scenarios)
+    monkeypatch.setattr(runner, "SCENARIO_RESULTS", scenarios)
     results, report = tmp_path / "results", tmp_path / "BENCHMARKS.md"
     main(["--envs", "lap", "--algos", "gail", "--demos", "1", "--seeds", "1", "--config-dir",
           str(tiny_configs(tmp_path / "configs")), "--results-dir", str(results), "--report-file", str(report),
@@ -130,13 +130,13 @@ def test_curve_points_average_exactly_one_episode_per_seed():
     env = gym.make("sb3_mpail/ContinuousCartPole-v0")
     lengths = []
     for i in range(4):
-        env.reset(seed=benchmark.EVAL_SEED + i)
+        env.reset(seed=runner.EVAL_SEED + i)
         steps, done = 0, False
         while not done:
             steps, (_, _, terminated, truncated, _) = steps + 1, env.step(np.ones(1, np.float32))
             done = terminated or truncated
         lengths.append(steps)
-    stats = json.loads((DEMO_DIR / "cartpole.json").read_text())
-    _, score, mean_return = benchmark.curve_point(PushRight(), "sb3_mpail/ContinuousCartPole-v0", 7, 4, stats)
+    stats = shipped_demo_info("cartpole")
+    _, score, mean_return = runner.curve_point(PushRight(), "sb3_mpail/ContinuousCartPole-v0", 7, 4, stats)
     assert len(set(lengths)) > 1 and mean_return == pytest.approx(np.mean(lengths))
     assert score == pytest.approx(normalised_score(mean_return, stats))

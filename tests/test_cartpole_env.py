@@ -1,7 +1,5 @@
 """``sb3_mpail/ContinuousCartPole-v0``: gymnasium's CartPole-v1 with a continuous force, and its shipped demos."""
 
-import json
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -11,10 +9,10 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/ContinuousCartPole-v0)
 from sb3_mpail import load_demos
+from sb3_mpail.demos import SHIPPED_DEMO_DIR, shipped_demo_info
 from sb3_mpail.envs.cartpole import ContinuousCartPoleEnv, cartpole_dynamics
 
 ENV_ID = "sb3_mpail/ContinuousCartPole-v0"
-DEMOS = Path(__file__).resolve().parent.parent / "demos"
 
 
 def test_env_passes_the_checkers():
@@ -70,9 +68,9 @@ def test_torch_dynamics_match_the_env_step():
 
 
 def test_shipped_demos_are_expert_episodes_of_the_env():
-    meta = json.loads((DEMOS / "cartpole.json").read_text())
+    meta = shipped_demo_info("cartpole")
     assert meta["env_id"] == ENV_ID
     assert meta["expert_return_mean"] > meta["random_return_mean"] + 100
-    demos = load_demos(DEMOS / "cartpole_4.npz", gym.make(ENV_ID).observation_space)
+    demos = load_demos(SHIPPED_DEMO_DIR / "cartpole_4.npz", gym.make(ENV_ID).observation_space)
     assert len(demos.observations) == sum(int(value) for value in meta["demo_returns"])
     assert np.all(np.abs(demos.observations[:, 2]) < 12 * np.pi / 180)  # the pole stays up throughout

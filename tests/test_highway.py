@@ -2,7 +2,6 @@
 
 import math
 import sys
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -10,6 +9,7 @@ import pytest
 import torch as th
 
 import sb3_mpail.envs  # noqa: F401  (registers the environments)
+from sb3_mpail.demos import SHIPPED_DEMO_DIR
 from sb3_mpail.mppi import DEFAULT_DYNAMICS, ParkingKinematics, make_dynamics
 from sb3_mpail.mppi.reference import rollout as rollout_step_by_step
 
@@ -159,7 +159,7 @@ def test_parking_env_refuses_an_observation_its_model_cannot_decode():
 
 
 def test_shipped_parking_demos_end_parked():
-    with np.load(Path(__file__).resolve().parent.parent / "demos" / "parking_4.npz") as data:
+    with np.load(SHIPPED_DEMO_DIR / "parking_4.npz") as data:
         episodes = np.split(data["obs"], np.cumsum(data["episode_lengths"])[:-1])
     assert len(episodes) == 4
     for episode in episodes:

@@ -1,7 +1,6 @@
 """highway-env road scenarios (racetrack, highway): the envs' observation, their planning models and shipped demos."""
 
 import sys
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -9,6 +8,7 @@ import pytest
 import torch as th
 
 import sb3_mpail.envs  # noqa: F401  (registers the environments)
+from sb3_mpail.demos import SHIPPED_DEMO_DIR
 from sb3_mpail.envs.highway_roads import EGO_FEATURES, EGO_SCALES
 from sb3_mpail.mppi import DEFAULT_DYNAMICS, HighwayKinematics, RacetrackKinematics, make_dynamics
 from sb3_mpail.mppi.reference import rollout as rollout_step_by_step
@@ -17,7 +17,6 @@ RACETRACK_ID = "sb3_mpail/Racetrack-v0"
 HIGHWAY_ID = "sb3_mpail/Highway-v0"
 # env id, its planning model, its action size
 ROAD_SCENARIOS = [(RACETRACK_ID, RacetrackKinematics, 1), (HIGHWAY_ID, HighwayKinematics, 2)]
-DEMOS = Path(__file__).resolve().parent.parent / "demos"
 
 
 @pytest.mark.parametrize("env_id", [RACETRACK_ID, HIGHWAY_ID])
@@ -112,7 +111,7 @@ def test_road_envs_refuse_an_observation_or_action_their_model_cannot_decode():
 
 
 def test_shipped_racetrack_demos_drive_a_lap_on_the_road_at_constant_speed():
-    with np.load(DEMOS / "racetrack_4.npz") as data:
+    with np.load(SHIPPED_DEMO_DIR / "racetrack_4.npz") as data:
         demos = data["obs"].astype(np.float64)
     assert demos.shape == (4, 201, 6)
     speeds = 10 * np.hypot(demos[..., 2], demos[..., 3])
@@ -123,7 +122,7 @@ def test_shipped_racetrack_demos_drive_a_lap_on_the_road_at_constant_speed():
 
 
 def test_shipped_highway_demos_end_fast_in_the_rightmost_lane():
-    with np.load(DEMOS / "highway_4.npz") as data:
+    with np.load(SHIPPED_DEMO_DIR / "highway_4.npz") as data:
         demos = data["obs"].astype(np.float64)
     assert demos.shape == (4, 201, 6)
     # highway-v0's 4 lanes are 4 m wide, centred on y = 0, 4, 8, 12 (12: the rightmost); its top reward from 30 m/s

@@ -1,16 +1,13 @@
 """The lap scenario: the closed track, its scripted driver, the cross-track error and the shipped noisy demo."""
 
-import json
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/NavigationLap-v0)
+from sb3_mpail.demos import SHIPPED_DEMO_DIR, shipped_demo_info
 from sb3_mpail.envs.lap import LAP_STEPS, TRACK_RADIUS, cross_track_errors, lap_driver, lap_metrics
-
-DEMOS = Path(__file__).resolve().parent.parent / "demos"
 
 
 def circle(n_points=720):
@@ -48,8 +45,8 @@ def test_lap_metrics_of_a_car_standing_still():
 
 
 def test_shipped_demo_is_one_noisy_lap_of_position_and_body_velocity():
-    meta = json.loads((DEMOS / "lap.json").read_text())
-    with np.load(DEMOS / "lap_1.npz") as data:
+    meta = shipped_demo_info("lap")
+    with np.load(SHIPPED_DEMO_DIR / "lap_1.npz") as data:
         demo = data["obs"]
     assert demo.shape == (1, LAP_STEPS + 1, 4)
     speed = np.hypot(demo[0, 1:, 2], demo[0, 1:, 3])

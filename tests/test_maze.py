@@ -1,8 +1,6 @@
 """gymnasium-robotics PointMaze: the missing-dependency error, the flat env, its point-mass model and the demos."""
 
-import json
 import sys
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -10,10 +8,9 @@ import pytest
 import torch as th
 
 import sb3_mpail.envs  # noqa: F401  (registers the environments)
-from sb3_mpail.demos import load_demos
+from sb3_mpail.demos import SHIPPED_DEMO_DIR, load_demos, shipped_demo_info
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, PointMassDynamics, make_dynamics
 
-ROOT = Path(__file__).resolve().parent.parent
 POINT_MAZE_ID = "sb3_mpail/PointMaze-v0"
 
 
@@ -88,7 +85,7 @@ def test_point_mass_model_predicts_mujoco_off_the_walls_and_not_on_them():
 
 def test_shipped_maze_demos_reach_the_goal_without_touching_the_walls():
     pytest.importorskip("gymnasium_robotics")
-    demos = ROOT / "demos" / "pointmaze_4.npz"
+    demos = SHIPPED_DEMO_DIR / "pointmaze_4.npz"
     with np.load(demos) as data:
         episodes = data["obs"]
     assert episodes.shape == (4, 101, 6)
@@ -98,5 +95,5 @@ def test_shipped_maze_demos_reach_the_goal_without_touching_the_walls():
         crossing = np.abs(episode[:, 1]) < 0.5
         assert episode[crossing, 0].min() > 0.5
     load_demos(demos, gym.make(POINT_MAZE_ID).observation_space)
-    stats = json.loads((ROOT / "demos" / "pointmaze.json").read_text())
+    stats = shipped_demo_info("pointmaze")
     assert stats["expert_success_rate"] == 1.0 and stats["expert_return_mean"] > 3 * stats["random_return_mean"]

@@ -233,12 +233,9 @@ def test_learn_with_progress_bar_and_logger_records_training_figures(demos, tmp_
 
 
 def test_shipped_pendulum_demos_match_the_environment():
-    from pathlib import Path
-
     from sb3_mpail import load_demos
 
-    demos_file = Path(__file__).resolve().parent.parent / "demos" / "pendulum_4.npz"
-    transitions = load_demos(demos_file, gym.make("Pendulum-v1").observation_space)
+    transitions = load_demos("pendulum_4", gym.make("Pendulum-v1").observation_space)
     assert transitions.observations.shape == (4 * 200, 3)
 
 

@@ -1,7 +1,6 @@
 """Tests for the ``sb3_mpail/Navigation-v0`` environment and its demonstration files."""
 
 import math
-import os
 import warnings
 
 import gymnasium as gym
@@ -11,10 +10,10 @@ from gymnasium.utils.env_checker import check_env as gymnasium_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
+from sb3_mpail.demos import shipped_demos
 from sb3_mpail.envs.navigation import NavigationEnv
 
 ENV_ID = "sb3_mpail/Navigation-v0"
-DEMO_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "demos")
 
 
 def bicycle_step(obs: np.ndarray, action: np.ndarray, dt: float = 0.1) -> np.ndarray:
@@ -145,11 +144,7 @@ def test_bicycle_model_matches_at_low_speed_steady_state() -> None:
 
 @pytest.mark.parametrize("n_demos", [1, 4, 16])
 def test_demo_file_holds_finite_in_space_observations(n_demos: int) -> None:
-    path = os.path.join(DEMO_DIR, f"navigation_{n_demos}.npz")
-    if not os.path.exists(path):
-        pytest.skip(f"{path} not generated yet (python demos/make_navigation_demos.py)")
-    with np.load(path, allow_pickle=False) as data:
-        obs = data["obs"]
+    obs = np.stack([trajectory.obs for trajectory in shipped_demos("navigation", n_demos)])
     assert obs.shape == (n_demos, 101, 12) and obs.dtype == np.float32
     assert np.all(np.isfinite(obs))
     space = NavigationEnv().observation_space

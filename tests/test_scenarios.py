@@ -1,4 +1,4 @@
-"""Smoke tests of issue 5's scenarios: each trains from its shipped demos with its zoo_configs/mpail.yml entry."""
+"""Smoke tests of the scenarios: each trains from its shipped demos with its entry of the shipped zoo hyperparameters."""
 
 import subprocess
 import sys
@@ -11,14 +11,12 @@ from sb3_mpail.mppi.costs import FeatureSelection
 from sb3_mpail.mppi.dynamics import LearnedDynamics, PointMassDynamics
 from sb3_mpail.mppi.highway_dynamics import HighwayKinematics, RacetrackKinematics
 
-ROOT = Path(__file__).resolve().parent.parent
-
 
 def zoo_train(env_id: str, timesteps: int, logs: Path) -> MPAIL:
     trained = subprocess.run(
         [sys.executable, "-m", "sb3_mpail.zoo", "train", "--algo", "mpail", "--env", env_id,
-         "-conf", str(ROOT / "zoo_configs" / "mpail.yml"), "-f", str(logs), "--seed", "0", "-n", str(timesteps)],
-        capture_output=True, text=True, timeout=300, cwd=ROOT,
+         "-f", str(logs), "--seed", "0", "-n", str(timesteps)],
+        capture_output=True, text=True, timeout=300, cwd=logs,
     )
     assert trained.returncode == 0, trained.stderr[-3000:]
     name = env_id.replace("/", "-")

@@ -7,17 +7,10 @@ import numpy as np
 import pytest
 
 from sb3_mpail import MPAIL
-from sb3_mpail.demos import load_demos
+from sb3_mpail.demos import SHIPPED_DEMO_DIR, load_demos, shipped_demo_info
 from sb3_mpail.envs.navigation import OOD_HALF_WIDTH
-from sb3_mpail.train_navigation import (
-    DEMO_INFO,
-    REPO_ROOT,
-    demo_reference_returns,
-    main,
-    normalized_score,
-    parse_args,
-    settings_from_args,
-)
+from sb3_mpail.evaluation import normalised_score, reference_returns
+from sb3_mpail.train_navigation import REFERENCE, main, parse_args, settings_from_args
 
 TINY = [
     "--timesteps", "200", "--n-envs", "2", "--n-steps", "50",
@@ -42,7 +35,8 @@ def test_main_command_trains_evaluates_saves_and_plots(trained):
     assert written["policy_kwargs"] == dict(n_samples=8, horizon=3, n_iterations=1)
     assert written["algorithm_kwargs"]["n_steps"] == 50
     assert np.isfinite(written["mean_return"])
-    assert written["normalized_score"] == pytest.approx(normalized_score(written["mean_return"]))
+    assert written["demos"] == "navigation_4"  # the shipped demo set, by name
+    assert written["normalized_score"] == pytest.approx(normalised_score(written["mean_return"], shipped_demo_info(REFERENCE)))
     # learning curve every 100 steps, ending with the final model's evaluation
     assert [point["steps"] for point in written["learning_curve"]] == [100, 200]
     assert written["learning_curve"][-1]["normalized_score"] == written["normalized_score"]
@@ -68,7 +62,7 @@ def test_saved_model_loads_without_demos_or_env_and_plans_in_and_out_of_distribu
 
 @pytest.mark.parametrize("n_demos", [1, 4, 16])
 def test_shipped_demos_load_against_the_registered_env_observation_space(n_demos):
-    path = REPO_ROOT / "demos" / f"navigation_{n_demos}.npz"
+    path = SHIPPED_DEMO_DIR / f"navigation_{n_demos}.npz"
     with np.load(path, allow_pickle=False) as data:
         demo_observations = data["obs"]
     assert demo_observations.shape == (n_demos, 101, 12)
@@ -81,10 +75,11 @@ def test_shipped_demos_load_against_the_registered_env_observation_space(n_demos
 
 
 def test_normalised_score_is_0_for_random_and_1_for_the_expert():
-    random_return, expert_return = demo_reference_returns(DEMO_INFO)
+    reference = shipped_demo_info(REFERENCE)
+    random_return, expert_return = reference_returns(reference)
     assert expert_return > 1000 > 0 > random_return
-    assert normalized_score(random_return) == pytest.approx(0.0)
-    assert normalized_score(expert_return) == pytest.approx(1.0)
+    assert normalised_score(random_return, reference) == pytest.approx(0.0)
+    assert normalised_score(expert_return, reference) == pytest.approx(1.0)
 
 
 def test_paper_settings_and_overrides():

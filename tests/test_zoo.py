@@ -2,9 +2,9 @@
 
 import subprocess
 import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+from sb3_mpail.demos import SHIPPED_DEMO_DIR
+from sb3_mpail.zoo import HYPERPARAMS, with_default_hyperparams
 
 CONFIG = """
 Pendulum-v1:
@@ -23,7 +23,7 @@ def zoo(*arguments: str) -> subprocess.CompletedProcess:
 
 def test_zoo_train_then_enjoy_on_a_tiny_budget(tmp_path):
     config = tmp_path / "mpail.yml"
-    config.write_text(CONFIG.format(demos=ROOT / "demos" / "pendulum_4.npz"))
+    config.write_text(CONFIG.format(demos=SHIPPED_DEMO_DIR / "pendulum_4.npz"))
     logs = tmp_path / "logs"
     trained = zoo("train", "--algo", "mpail", "--env", "Pendulum-v1", "-conf", str(config), "-f", str(logs), "--seed", "0")
     assert trained.returncode == 0, trained.stderr[-3000:]
@@ -38,9 +38,19 @@ def test_zoo_train_then_enjoy_on_a_tiny_budget(tmp_path):
 
 def test_zoo_train_with_normalize_true_is_refused_saying_why(tmp_path):
     config = tmp_path / "mpail.yml"
-    config.write_text(CONFIG.format(demos=ROOT / "demos" / "pendulum_4.npz") + "  normalize: true\n")
+    config.write_text(CONFIG.format(demos="pendulum_4") + "  normalize: true\n")
     trained = zoo("train", "--algo", "mpail", "--env", "Pendulum-v1", "-conf", str(config), "-f", str(tmp_path / "logs"))
     assert trained.returncode == 1
     refusal = "ValueError: MPAIL needs the environment's raw observations, but this one is wrapped in VecNormalize"
     assert refusal in trained.stderr, trained.stderr[-3000:]
     assert "(rl_zoo3: normalize: false)" in trained.stderr
+
+
+def test_train_reads_the_shipped_hyperparameters_unless_a_file_is_named():
+    assert HYPERPARAMS.is_file()
+    defaulted = with_default_hyperparams(["train", "--algo", "mpail", "--env", "Pendulum-v1"])
+    assert defaulted == ["train", "--algo", "mpail", "--env", "Pendulum-v1", "--conf-file", str(HYPERPARAMS)]
+    named = ["train", "--algo", "mpail", "--env", "Pendulum-v1", "-conf", "mine.yml"]
+    assert with_default_hyperparams(named) == named
+    for other in (["train", "--algo", "ppo", "--env", "Pendulum-v1"], ["enjoy", "--algo", "mpail", "--env", "Pendulum-v1"]):
+        assert with_default_hyperparams(other) == other

@@ -4,6 +4,9 @@ import gymnasium as gym
 
 from sb3_mpail.envs.navigation import NavigationEnv
 
+#: how to install the simulators of the highway-env, MuJoCo and gymnasium-robotics scenarios (the ``scenarios`` extra)
+SCENARIOS_INSTALL_HINT = 'pip install "sb3-mpail[scenarios]" (in a checkout: pip install -e ".[scenarios]")'
+
 # Guard against re-registration warnings when the module is reloaded.
 if "sb3_mpail/Navigation-v0" not in gym.registry:
     gym.register(

@@ -15,10 +15,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from sb3_mpail.evaluation import deterministic_episode_returns
+from sb3_mpail.envs import SCENARIOS_INSTALL_HINT
+from sb3_mpail.evaluation import evaluate_episodes
 
 ANT_FORWARD_VELOCITY_INDEX = 13
-MUJOCO_INSTALL_HINT = 'pip install -e ".[scenarios]" (from the repository root) or pip install mujoco==2.3.7'
 
 
 def require_mujoco() -> None:
@@ -30,7 +30,7 @@ def require_mujoco() -> None:
     try:
         import mujoco  # noqa: F401
     except ImportError as error:
-        raise ImportError(f"This scenario needs mujoco, which is not installed: {MUJOCO_INSTALL_HINT}") from error
+        raise ImportError(f"This scenario needs mujoco, which is not installed: {SCENARIOS_INSTALL_HINT}") from error
 
 
 class Float32Observation(gym.ObservationWrapper):
@@ -80,9 +80,9 @@ def evaluate_ant(model: Any, n_episodes: int, seed: int, n_envs: int = 1) -> Dic
     def record_forward_velocity(info: Dict[str, Any], _: bool) -> None:
         forward_velocities.append(float(info["x_velocity"]))
 
-    returns = deterministic_episode_returns(model, "sb3_mpail/Ant-v0", n_episodes, seed, n_envs, record_forward_velocity)
+    episodes = evaluate_episodes(model, "sb3_mpail/Ant-v0", n_episodes, seed, n_envs, on_step=record_forward_velocity)
     return {
-        "return": float(np.mean(returns)),
-        "return_std": float(np.std(returns)),
+        "return": episodes.mean_return,
+        "return_std": episodes.std_return,
         "forward_speed": float(np.mean(forward_velocities)),
     }

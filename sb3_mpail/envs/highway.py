@@ -15,9 +15,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from sb3_mpail.envs import SCENARIOS_INSTALL_HINT
+
 PARKING_FEATURES = ["x", "y", "vx", "vy", "cos_h", "sin_h"]
 PARKING_SCALES = [100, 100, 5, 5, 1, 1]
-SCENARIOS_INSTALL_HINT = 'pip install -e ".[scenarios]" (from the repository root) or pip install highway-env==1.9.1'
 
 
 def require_highway_env() -> None:

@@ -15,14 +15,12 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.type_aliases import PolicyPredictor
 
-from sb3_mpail.evaluation import deterministic_episode_returns
+from sb3_mpail.envs import SCENARIOS_INSTALL_HINT
+from sb3_mpail.evaluation import evaluate_episodes
 
 if TYPE_CHECKING:
     from gymnasium_robotics.envs.maze.maze_v4 import Maze
 
-GYMNASIUM_ROBOTICS_INSTALL_HINT = (
-    'pip install -e ".[scenarios]" (from the repository root) or pip install gymnasium-robotics==1.2.4 mujoco==2.3.7'
-)
 
 # PointMaze_UMaze-v3's map (1 = wall) with the reset cell "r" and the goal cell "g" fixed, in (row, column) cells
 # of 1 m; the walls between them make the shortest path a U of three corridors.
@@ -47,7 +45,7 @@ def require_gymnasium_robotics() -> None:
         import mujoco  # noqa: F401
     except ImportError as error:
         raise ImportError(
-            f"This scenario needs gymnasium-robotics and mujoco, which are not installed: {GYMNASIUM_ROBOTICS_INSTALL_HINT}"
+            f"This scenario needs gymnasium-robotics and mujoco, which are not installed: {SCENARIOS_INSTALL_HINT}"
         ) from error
 
 
@@ -138,16 +136,13 @@ def point_maze_figures(model: PolicyPredictor, n_episodes: int, seed: int) -> Di
         of the goal) and ``wall_steps`` (fraction of steps in which the ball touched a wall)
     """
     wall_contacts: List[bool] = []
-    successes: List[bool] = []
 
-    def record(info: Dict[str, Any], done: bool) -> None:
+    def record_wall_contact(info: Dict[str, Any], _: bool) -> None:
         wall_contacts.append(info["wall_contact"])
-        if done:
-            successes.append(info["success"])
 
-    returns = deterministic_episode_returns(model, POINT_MAZE_ID, n_episodes, seed, on_step=record)
+    episodes = evaluate_episodes(model, POINT_MAZE_ID, n_episodes, seed, n_envs=1, on_step=record_wall_contact)
     return {
-        "return": float(np.mean(returns)),
-        "success": float(np.mean(successes)),
+        "return": episodes.mean_return,
+        "success": float(np.mean([info["success"] for info in episodes.final_infos])),
         "wall_steps": float(np.mean(wall_contacts)),
     }

@@ -10,20 +10,21 @@ built on the ``imitation`` library and Stable-Baselines3:
 * ``airl``: **AIRL (obs-only)**. imitation's AIRL subtracts ``log pi(a_expert | s)`` from its logit, meaningless
   without expert actions, so this is imitation's adversarial trainer with AIRL's shaped state-only reward
   ``f(s, s') = g(s) + gamma h(s') - h(s)`` (``BasicShapedRewardNet``) as the logit, no policy term, PPO generator.
-* ``bc``: imitation's BC. It **uses expert actions**: ``demos/<env>_<n>_actions.npz`` (:func:`make_action_demos`;
-  pendulum's and cartpole's recovered exactly from the demos by inverting the env's dynamics).
+* ``bc``: imitation's BC. It **uses expert actions**: ``benchmarks/action_demos/<env>_<n>_actions.npz``
+  (:func:`make_action_demos`; pendulum's and cartpole's recovered exactly from the demos by inverting the env's
+  dynamics).
 * ``irl_mpc``: the GAIL-learned reward and critic deployed through MPAIL's MPPI planner with no further training:
-  the GAIL run of ``zoo_configs/gail.yml``, its discriminator as step cost ``log(1 - D(s, s'))`` (the negated GAIL
+  the GAIL run of ``benchmarks/configs/gail.yml``, its discriminator as step cost ``log(1 - D(s, s'))`` (the negated GAIL
   reward) and its PPO critic as terminal value. Its env steps are GAIL's.
 
-Hyperparameters come from ``zoo_configs/<algo>.yml`` (rl_zoo3's layout, :func:`load_config`).
+Hyperparameters come from ``benchmarks/configs/<algo>.yml`` and, for MPAIL, from the package's own
+``sb3_mpail/hyperparams/mpail.yml`` (rl_zoo3's layout, :func:`load_config`).
 
-Action-labelled demos for BC: ``python -m sb3_mpail.baselines make-action-demos --env navigation``.
+Action-labelled demos for BC: ``python -m benchmarks.baselines make-action-demos --env navigation``.
 """
 
 import argparse
 import importlib.util
-import json
 import tempfile
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
@@ -49,14 +50,18 @@ from torch.nn import functional as F
 from torch.nn.utils.parametrizations import spectral_norm
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
-from sb3_mpail.demos import load_demos
+from sb3_mpail.demos import DemoSource, list_shipped_demos, load_demos, shipped_demo_info, shipped_demos
 from sb3_mpail.envs import cartpole
 from sb3_mpail.mppi.costs import FeatureSelection, make_transition_discriminator
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, PendulumDynamics
+from sb3_mpail.zoo import HYPERPARAMS
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-CONFIG_DIR = REPO_ROOT / "zoo_configs"
-DEMO_DIR = REPO_ROOT / "demos"
+#: the baselines' hyperparameter files; MPAIL's are the package's own (``sb3_mpail.zoo.HYPERPARAMS``)
+CONFIG_DIR = Path(__file__).resolve().parent / "configs"
+#: the expert-action twins of the shipped demos, for BC only (experiment data, not shipped with the package)
+ACTION_DEMO_DIR = Path(__file__).resolve().parent / "action_demos"
+#: the scripts that made the shipped demos
+DEMO_SCRIPT_DIR = Path(__file__).resolve().parent.parent / "demos"
 
 ALGOS: Tuple[str, ...] = ("mpail", "gail", "airl", "bc", "irl_mpc")
 #: names used in every table and figure
@@ -111,18 +116,32 @@ def env_name_of(env_id: str) -> str:
     return ENV_NAMES.get(env_id, env_id.split("/")[-1].split("-")[0].lower())
 
 
-def load_config(algo: str, env_id: str, config_dir: Path = CONFIG_DIR) -> Dict[str, Any]:
+def config_path(algo: str, config_dir: Optional[Path] = None) -> Path:
     """
-    The entry of ``env_id`` in ``<config_dir>/<algo>.yml`` (rl_zoo3's layout) with its ``policy_kwargs`` and
-    ``reward_net_kwargs`` strings evaluated as rl_zoo3 does. ``irl_mpc``'s entry also gets ``gail``: the GAIL entry
-    whose reward and critic it deploys (same ``n_timesteps``, ``n_envs`` and ``demos``, checked).
+    The hyperparameter file of ``algo``: ``<config_dir>/<algo>.yml``, by default :data:`CONFIG_DIR`'s, or the
+    package's own for MPAIL.
+
+    :param algo: one of :data:`ALGOS`
+    :param config_dir: a folder holding every algorithm's file (``None``: the defaults)
+    """
+    if config_dir is not None:
+        return Path(config_dir) / f"{algo}.yml"
+    return HYPERPARAMS if algo == "mpail" else CONFIG_DIR / f"{algo}.yml"
+
+
+def load_config(algo: str, env_id: str, config_dir: Optional[Path] = None) -> Dict[str, Any]:
+    """
+    The entry of ``env_id`` in ``algo``'s hyperparameter file (:func:`config_path`, rl_zoo3's layout) with its
+    ``policy_kwargs`` and ``reward_net_kwargs`` strings evaluated as rl_zoo3 does. ``irl_mpc``'s entry also gets
+    ``gail``: the GAIL entry whose reward and critic it deploys (same ``n_timesteps``, ``n_envs`` and ``demos``,
+    checked).
 
     :param algo: one of :data:`ALGOS`
     :param env_id: the gymnasium id (the YAML key)
-    :param config_dir: folder of the YAML files
+    :param config_dir: a folder holding every algorithm's file (``None``: the defaults)
     :raises ValueError: the file has no entry for ``env_id``, or IRL-MPC's entry disagrees with GAIL's
     """
-    path = Path(config_dir) / f"{algo}.yml"
+    path = config_path(algo, config_dir)
     entry = (yaml.safe_load(path.read_text()) or {}).get(env_id)
     if entry is None:
         raise ValueError(f"{path} has no entry for {env_id}.")
@@ -140,34 +159,45 @@ def load_config(algo: str, env_id: str, config_dir: Path = CONFIG_DIR) -> Dict[s
     return entry
 
 
-def expert_stats(env_id: str, demo_dir: Path = DEMO_DIR) -> Dict[str, Any]:
+def expert_stats(env_id: str) -> Dict[str, Any]:
     """
-    ``demos/<env>.json``: the expert's and the random policy's mean returns (the normalised score's 1 and 0).
+    The env's shipped demo information: the expert's and the random policy's mean returns (the normalised score's
+    1 and 0).
 
     :param env_id: gymnasium id
-    :param demo_dir: folder of the demos
     """
-    return json.loads((Path(demo_dir) / f"{env_name_of(env_id)}.json").read_text())
+    return shipped_demo_info(env_name_of(env_id))
 
 
-def action_demos_path(path: Path | str) -> Path:
+def demo_set_name(env_id: str, n_demos: int) -> str:
     """
-    The action-labelled twin of an observation-only demo file: ``navigation_4.npz`` -> ``navigation_4_actions.npz``.
+    The shipped demo set of ``n_demos`` episodes of ``env_id``, e.g. ``navigation_4``.
 
-    :param path: observation-only demos
+    :param env_id: gymnasium id or short name
+    :param n_demos: episodes in the set
     """
-    path = Path(path)
-    return path.with_name(f"{path.stem}_actions{path.suffix}")
+    return f"{env_name_of(env_id_of(env_id))}_{n_demos}"
+
+
+def action_demos_path(demos: Path | str, directory: Path = ACTION_DEMO_DIR) -> Path:
+    """
+    The action-labelled twin of an observation-only demo set: ``navigation_4`` (or ``.../navigation_4.npz``) ->
+    ``<directory>/navigation_4_actions.npz``.
+
+    :param demos: a shipped demo set's name or an observation-only demo file
+    :param directory: folder of the twins
+    """
+    return Path(directory) / f"{Path(demos).stem}_actions.npz"
 
 
 def observation_only_transitions(
-    path: Path | str, env: VecEnv, feature_indices: Optional[Sequence[int]] = None
+    path: DemoSource, env: VecEnv, feature_indices: Optional[Sequence[int]] = None
 ) -> types.Transitions:
     """
     The demos as imitation ``Transitions`` for a state-only discriminator: real ``(s, s')``, dummy zero actions
     (imitation requires ``acts``; the reward nets here never read them).
 
-    :param path: observation-only ``.npz`` demos
+    :param path: observation-only demos (a shipped demo set's name, an ``.npz``, ...)
     :param env: the training env (its spaces check the demos)
     :param feature_indices: the demos hold only these state dimensions: they are written there into otherwise zero
         states, since imitation batches demo and agent states together; the discriminator must then read only those
@@ -193,41 +223,19 @@ def action_transitions(path: Path | str) -> types.Transitions:
     """
     Expert transitions with actions for BC, from the action-labelled twin of ``path``.
 
-    :param path: the observation-only demo file; its ``_actions`` twin is read
+    :param path: the observation-only demo set; its ``_actions`` twin is read
     :raises FileNotFoundError: the action-labelled file is missing (make it with :func:`make_action_demos`)
     """
     labelled = action_demos_path(path)
     if not labelled.exists():
         raise FileNotFoundError(
             f"BC needs expert actions: {labelled} is missing; make it with "
-            "`python -m sb3_mpail.baselines make-action-demos --env <name>`."
+            "`python -m benchmarks.baselines make-action-demos --env <name>`."
         )
     with np.load(labelled) as data:
         observations, actions = data["obs"], data["acts"]
     trajectories = [types.Trajectory(obs=o, acts=a, infos=None, terminal=True) for o, a in zip(observations, actions)]
     return rollout.flatten_trajectories(trajectories)
-
-
-def evaluate(
-    predictor: Any, env_id: str, n_episodes: int, seed: int, env_kwargs: Optional[Dict[str, Any]] = None
-) -> List[types.TrajectoryWithRew]:
-    """
-    One deterministic episode in each of ``n_episodes`` envs at once (env ``i`` reset with ``seed + i``), through
-    imitation's ``rollout.generate_trajectories`` (which carries recurrent state, here MPPI's plans).
-
-    :param predictor: an SB3 algorithm or policy (MPAIL, PPO, an MPPI or BC policy)
-    :param env_id: gymnasium id
-    :param n_episodes: episodes (= parallel envs)
-    :param seed: seed of the first env
-    :param env_kwargs: ``gym.make`` keyword arguments, e.g. ``dict(start_region="ood")``
-    """
-    env = make_vec_env(env_id, n_envs=n_episodes, seed=seed, env_kwargs=env_kwargs)
-    try:
-        return rollout.generate_trajectories(
-            predictor, env, rollout.make_min_episodes(n_episodes), np.random.default_rng(seed), deterministic_policy=True
-        )
-    finally:
-        env.close()
 
 
 class _EvalSchedule:
@@ -359,7 +367,7 @@ def make_gail_discriminator(
     return FeatureSelectingRewardNet(observation_space, action_space, net_kwargs["features"], hid_sizes, use_spectral_norm)
 
 
-def make_adversarial(algo: str, env: VecEnv, demos: Path | str, seed: int, hyperparams: Dict[str, Any]) -> AdversarialTrainer:
+def make_adversarial(algo: str, env: VecEnv, demos: DemoSource, seed: int, hyperparams: Dict[str, Any]) -> AdversarialTrainer:
     """
     A GAIL or AIRL (obs-only) trainer with a PPO generator.
 
@@ -469,7 +477,7 @@ def irl_mpc_policy(trainer: GAIL, env_id: str, hyperparams: Dict[str, Any]) -> n
 def train_adversarial(
     algo: str,
     env_id: str,
-    demos: Path | str,
+    demos: DemoSource,
     timesteps: int,
     seed: int,
     n_envs: int,
@@ -567,7 +575,7 @@ class _RolloutEvalCallback(BaseCallback):
 
 def train_mpail(
     env_id: str,
-    demos: Path | str,
+    demos: DemoSource,
     timesteps: int,
     seed: int,
     n_envs: int,
@@ -590,7 +598,7 @@ def train_mpail(
     from sb3_mpail.mpail import MPAIL
 
     settings = dict(hyperparams)
-    model = MPAIL(settings.pop("policy", "MlpMPPI"), make_vec_env(env_id, n_envs=n_envs, seed=seed), str(demos), seed=seed,
+    model = MPAIL(settings.pop("policy", "MlpMPPI"), make_vec_env(env_id, n_envs=n_envs, seed=seed), demos, seed=seed,
                   device="cpu", **settings)  # fmt: skip
     schedule = _EvalSchedule(eval_every, on_eval)
     model.learn(timesteps, callback=_RolloutEvalCallback(schedule, timesteps))
@@ -613,7 +621,7 @@ def train_baseline(
 
     :param algo: one of :data:`ALGOS`
     :param env_id: gymnasium id or short name
-    :param demos: ``demos/<env>_<n>.npz`` (BC reads its ``_actions`` twin)
+    :param demos: a shipped demo set, ``<env>_<n>`` (:func:`demo_set_name`; BC reads its ``_actions`` twin)
     :param seed: training seed (envs, networks, planner noise)
     :param hyperparams: :func:`load_config`'s entry (``n_timesteps`` and ``n_envs`` are the budget)
     :param eval_every: env steps between ``on_eval`` calls; BC, which has no env steps, is evaluated once at step 0
@@ -646,7 +654,7 @@ def train_baseline(
 
 def _demo_script(name: str) -> Any:
     """The module ``demos/<name>.py`` (the scripts that made the shipped demos)."""
-    spec = importlib.util.spec_from_file_location(name, DEMO_DIR / f"{name}.py")
+    spec = importlib.util.spec_from_file_location(name, DEMO_SCRIPT_DIR / f"{name}.py")
     assert spec is not None and spec.loader is not None
     script = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(script)
@@ -706,10 +714,10 @@ INVERSE_DYNAMICS: Dict[str, Tuple[Callable[[np.ndarray], np.ndarray], Callable[[
 }
 
 
-def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Path = DEMO_DIR) -> List[Path]:
+def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Path = ACTION_DEMO_DIR) -> List[Path]:
     """
-    Writes ``<env>_<n>_actions.npz`` (``obs`` and the expert's ``acts``) beside each shipped ``<env>_<n>.npz``, after
-    checking that the actions reproduce the shipped observations.
+    Writes ``<out_dir>/<env>_<n>_actions.npz`` (``obs`` and the expert's ``acts``) for each shipped demo set
+    ``<env>_<n>``, after checking that the actions reproduce the shipped observations.
 
     Navigation: replays the PPO expert that ``demos/make_navigation_demos.py`` saved (``expert_path``; rerunning that
     script retrains the same expert bit for bit on this stack) from the demos' start seeds. Pendulum and cartpole:
@@ -719,16 +727,16 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
 
     :param env: ``navigation``, ``pendulum`` or ``cartpole``
     :param expert_path: the navigation expert
-    :param out_dir: folder of the shipped demos, where the files go
+    :param out_dir: where the files go
     :raises RuntimeError: the actions do not reproduce a shipped demo
     """
     env_id = env_id_of(env)
     name = env_name_of(env_id)
     gym_env = gym.make(env_id)
-    shipped = sorted(Path(out_dir).glob(f"{name}_*[0-9].npz"), key=lambda p: int(p.stem.split("_")[-1]))
-    if not shipped:
-        raise FileNotFoundError(f"No {name}_<n>.npz demos in {out_dir}.")
-    demos = np.load(shipped[-1])["obs"]
+    sizes = [int(n) for family, n in (shipped.rsplit("_", 1) for shipped in list_shipped_demos()) if family == name]
+    if not sizes:
+        raise FileNotFoundError(f"No {name}_<n> demo set is shipped ({', '.join(list_shipped_demos())}).")
+    demos = np.stack([trajectory.obs for trajectory in shipped_demos(name, max(sizes))])
     if name == "navigation":
         script = _demo_script("make_navigation_demos")
         expert = script.make_expert_policy(PPO.load(expert_path or "/tmp/navigation_expert_ppo.zip", device="cpu"), gym_env)
@@ -744,11 +752,12 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
     else:
         raise ValueError(f"No action labels known for {env!r}.")
     if not np.allclose(reproduced, demos, atol=1e-4):
-        raise RuntimeError(f"The actions do not reproduce {shipped[-1]} (max error {np.abs(reproduced - demos).max()}).")
+        raise RuntimeError(
+            f"The actions do not reproduce {name}_{max(sizes)} (max error {np.abs(reproduced - demos).max()})."
+        )
     written = []
-    for path in shipped:
-        n = int(path.stem.split("_")[-1])
-        written.append(action_demos_path(path))
+    for n in sorted(sizes):
+        written.append(action_demos_path(f"{name}_{n}", out_dir))
         np.savez_compressed(written[-1], obs=demos[:n], acts=actions[:n])
     return written
 
@@ -761,10 +770,10 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     """
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     commands = parser.add_subparsers(dest="command", required=True)
-    make = commands.add_parser("make-action-demos", help="write demos/<env>_<n>_actions.npz for BC")
+    make = commands.add_parser("make-action-demos", help="write benchmarks/action_demos/<env>_<n>_actions.npz for BC")
     make.add_argument("--env", required=True, choices=sorted(ENV_NAMES.values()))
     make.add_argument("--expert", type=Path, default=None, help="navigation: the saved PPO expert")
-    make.add_argument("--out-dir", type=Path, default=DEMO_DIR)
+    make.add_argument("--out-dir", type=Path, default=ACTION_DEMO_DIR)
     args = parser.parse_args(argv)
     for path in make_action_demos(args.env, args.expert, args.out_dir):
         print(f"wrote {path}")

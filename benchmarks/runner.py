@@ -1,10 +1,11 @@
 """
 The benchmark grid: MPAIL against GAIL, AIRL (obs-only), BC (uses expert actions) and IRL-MPC, on the same demos and
-env-step budget (``zoo_configs/<algo>.yml``), over envs x demo counts x seeds.
+env-step budget (``benchmarks/configs/<algo>.yml``, MPAIL's ``sb3_mpail/hyperparams/mpail.yml``), over envs x demo
+counts x seeds.
 
-    python -m sb3_mpail.benchmark --envs navigation pendulum --algos mpail gail airl bc irl_mpc --demos 1 4 16 --seeds 5
-    python -m sb3_mpail.benchmark --envs cartpole --algos mpail gail airl --demos 4 --seeds 3
-    python -m sb3_mpail.benchmark --envs lap --algos gail --demos 1 --seeds 3
+    python -m benchmarks.runner --envs navigation pendulum --algos mpail gail airl bc irl_mpc --demos 1 4 16 --seeds 5
+    python -m benchmarks.runner --envs cartpole --algos mpail gail airl --demos 4 --seeds 3
+    python -m benchmarks.runner --envs lap --algos gail --demos 1 --seeds 3
 
 Each finished run writes ``<results-dir>/<env>/<algo>_<n>demos_seed<s>.json`` (its learning curve, final score and,
 on navigation, its out-of-distribution episodes); a rerun skips the runs whose file exists, so an interrupted grid
@@ -29,30 +30,25 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import torch as th
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 
-from benchmarks.report import BENCHMARKS_FILE, machine_description, write_section
-from benchmarks.scenarios import RESULTS as SCENARIO_RESULTS
-from benchmarks.scenarios import SCENARIOS, lap_figures
-from sb3_mpail.baselines import (
+from benchmarks.baselines import (
     ALGO_LABELS,
     ALGOS,
-    CONFIG_DIR,
-    DEMO_DIR,
+    demo_set_name,
     env_id_of,
     env_name_of,
-    evaluate,
     expert_stats,
     load_config,
     train_baseline,
 )
-from sb3_mpail.demos import normalised_score
+from benchmarks.report import BENCHMARKS_FILE, machine_description, write_section
+from benchmarks.scenarios import RESULTS as SCENARIO_RESULTS
+from benchmarks.scenarios import SCENARIOS, lap_figures
 from sb3_mpail.envs.navigation import REWARD_OFFSET
+from sb3_mpail.evaluation import evaluate_episodes, normalised_score
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-RESULTS_DIR = REPO_ROOT / "benchmarks" / "results"
-FIGURES_DIR = REPO_ROOT / "benchmarks" / "figures"
+RESULTS_DIR = Path(__file__).resolve().parent / "results"
+FIGURES_DIR = Path(__file__).resolve().parent / "figures"
 TARGET = 0.9
 #: learning-curve episodes start from ``reset(seed=EVAL_SEED + i)``, the OOD ones from ``OOD_SEED + i``; both
 #: ranges are disjoint from the demos' start seeds
@@ -82,7 +78,7 @@ def result_path(results_dir: Path, env_id: str, algo: str, n_demos: int, seed: i
 
     :param results_dir: the grid's folder
     :param env_id: gymnasium id
-    :param algo: one of :data:`~sb3_mpail.baselines.ALGOS`
+    :param algo: one of :data:`~benchmarks.baselines.ALGOS`
     :param n_demos: demo count
     :param seed: training seed
     :param timesteps: the budget override, or ``None``
@@ -133,19 +129,14 @@ def curve_point(predictor: Any, env_id: str, steps: int, n_episodes: int, stats:
     :param steps: env steps trained so far
     :param n_episodes: evaluation episodes, env ``i`` reset with ``EVAL_SEED + i`` (not the lap's: its lap count is
         the scenario's)
-    :param stats: :func:`~sb3_mpail.baselines.expert_stats`
+    :param stats: :func:`~benchmarks.baselines.expert_stats`
     """
     if env_id == LAP:
         figures = lap_figures(predictor, stats, SCENARIOS["lap"].n_eval_episodes)
         return (steps, *(figures[key] for key in LAP_FIGURES))
-    # exactly one episode per seed: imitation's rollout collector would add second episodes of the envs whose first
-    # one ended early (cartpole's falls), weighting the mean towards failures
-    env = make_vec_env(env_id, n_envs=n_episodes, seed=EVAL_SEED)
-    try:
-        returns, _ = evaluate_policy(predictor, env, n_episodes, deterministic=True, return_episode_rewards=True)
-    finally:
-        env.close()
-    mean_return = float(np.mean(returns))
+    # exactly one episode per seed (one env each), so the envs whose first episode ends early (cartpole's falls) add
+    # no second ones weighting the mean towards failures
+    mean_return = evaluate_episodes(predictor, env_id, n_episodes, EVAL_SEED).mean_return
     return steps, normalised_score(mean_return, stats), mean_return
 
 
@@ -154,8 +145,8 @@ def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
     Trains one job and writes each of its algorithms' result file; skips it when all exist.
 
     :param job: an entry of :func:`make_jobs`
-    :param options: ``results_dir``, ``config_dir``, ``eval_episodes``, ``ood_episodes``, ``eval_every`` (0: a tenth of
-        the budget), ``timesteps`` (``None``: the configs'), ``threads``
+    :param options: ``results_dir``, ``config_dir`` (``None``: the default files), ``eval_episodes``,
+        ``ood_episodes``, ``eval_every`` (0: a tenth of the budget), ``timesteps`` (``None``: the configs'), ``threads``
     :return: the result files written
     """
     env_id, algos, n_demos, seed = job["env_id"], job["algos"], job["n_demos"], job["seed"]
@@ -178,8 +169,7 @@ def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
                 finals[name] = predictor
 
     start = time.perf_counter()
-    train_baseline(algo, env_id, DEMO_DIR / f"{env_name_of(env_id)}_{n_demos}.npz", seed, hyperparams, eval_every, on_eval,
-                   budget)  # fmt: skip
+    train_baseline(algo, env_id, demo_set_name(env_id, n_demos), seed, hyperparams, eval_every, on_eval, budget)
     seconds = time.perf_counter() - start
     for name, path in paths.items():
         result: Dict[str, Any] = dict(
@@ -192,10 +182,11 @@ def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
             result.update(final_score=curves[name][-1][1], final_return=curves[name][-1][2],
                           steps_to_target=next((point[0] for point in curves[name] if point[1] >= TARGET), None))  # fmt: skip
         if env_id == NAVIGATION and options["ood_episodes"] > 0:
-            trajectories = evaluate(finals[name], env_id, options["ood_episodes"], OOD_SEED, dict(start_region="ood"))
-            final_rewards = np.array([t.rews[-1] for t in trajectories])
+            episodes = evaluate_episodes(finals[name], env_id, options["ood_episodes"], OOD_SEED,
+                                         env_kwargs=dict(start_region="ood"), record_observations=True)  # fmt: skip
+            final_rewards = np.array([REWARD_OFFSET - info["distance_to_goal"] for info in episodes.final_infos])
             result["ood"] = dict(
-                final_positions=[[float(t.obs[-1][0]), float(t.obs[-1][1])] for t in trajectories],
+                final_positions=[[float(obs[-1][0]), float(obs[-1][1])] for obs in episodes.observations],
                 final_rewards=final_rewards.tolist(),
                 reached=float(np.mean(REWARD_OFFSET - final_rewards <= GOAL_RADIUS)),
                 mean_final_reward=float(final_rewards.mean()),
@@ -345,7 +336,7 @@ def lap_table(
     :param demos: demo counts
     :param n_seeds: seeds asked for (cells with fewer are marked incomplete)
     :param scenario_mpail: when the grid has no MPAIL runs, add MPAIL's from ``benchmarks/scenarios.py``'s lap run
-        (same laps, same measure, ``zoo_configs/mpail.yml``'s budget); so not for grids with ``--timesteps``
+        (same laps, same measure, ``sb3_mpail/hyperparams/mpail.yml``'s budget); so not for grids with ``--timesteps``
     """
     lines = ["| algorithm | demos | seeds | mean cross-track error (m) | max cross-track error (m) | speed (m/s) | source |",
              "|---|---|---|---|---|---|---|"]  # fmt: skip
@@ -532,7 +523,8 @@ def write_report(
             f"{stats['expert_return_mean']:.1f} ({stats['expert_algo']}); final deterministic evaluation on "
             f"episodes from fixed seeds; mean ± 95% CI (Student's t) over seeds. Env-step budgets: "
             + ", ".join(f"{ALGO_LABELS[a]} {'/'.join(map(str, budgets[a])) or '-'}" for a in grid_algos)
-            + " (zoo_configs/<algo>.yml unless `--timesteps` overrides them). BC uses the expert's actions and no env "
+            + " (benchmarks/configs/<algo>.yml, MPAIL's sb3_mpail/hyperparams/mpail.yml, unless `--timesteps` overrides "
+            "them). BC uses the expert's actions and no env "
             "steps; IRL-MPC's env steps are its GAIL run's. Learning curves are evaluated once the env-step count passes "
             "each multiple of `--eval-every` (default a tenth of the budget), after whole rollouts or rounds, so env "
             "steps to 0.9 are resolved to that grid.",
@@ -582,7 +574,7 @@ def lap_report(
     The lap's BENCHMARKS.md section: :func:`lap_table` with the budgets, the demo's driver and the command.
 
     :param results: :func:`load_results` of the lap grid
-    :param stats: ``demos/lap.json``
+    :param stats: the lap demos' information (``shipped_demo_info("lap")``)
     :param algos: table rows
     :param demos: demo counts
     :param n_seeds: seeds asked for
@@ -613,7 +605,7 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--envs", nargs="+", default=["navigation", "pendulum"], help="env ids or short names")
     parser.add_argument("--algos", nargs="+", default=list(ALGOS), choices=ALGOS)
-    parser.add_argument("--demos", nargs="+", type=int, default=[4], help="demo counts (demos/<env>_<n>.npz)")
+    parser.add_argument("--demos", nargs="+", type=int, default=[4], help="demo counts (shipped demo sets <env>_<n>)")
     parser.add_argument("--seeds", type=int, default=5, help="seeds 0 .. n-1")
     parser.add_argument("--workers", type=int, default=1, help="local processes")
     parser.add_argument("--ray-address", default=None, help="run on this Ray cluster instead ('auto': the local one)")
@@ -622,7 +614,9 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     parser.add_argument("--eval-every", type=int, default=0, help="env steps between curve points (0: a tenth of the budget)")
     parser.add_argument("--ood-episodes", type=int, default=100, help="navigation OOD episodes per run (0: none)")
     parser.add_argument("--timesteps", type=int, default=None, help="override every budget (a separate grid and report)")
-    parser.add_argument("--config-dir", type=Path, default=CONFIG_DIR)
+    parser.add_argument(
+        "--config-dir", type=Path, default=None, help="a folder of every algorithm's <algo>.yml (default: the shipped ones)"
+    )
     parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR)
     parser.add_argument("--report-file", type=Path, default=BENCHMARKS_FILE)
     parser.add_argument("--figures-dir", type=Path, default=FIGURES_DIR)
@@ -643,7 +637,7 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
                    threads=args.threads)  # fmt: skip
     if not args.report_only:
         run_grid(make_jobs(args.envs, args.algos, args.demos, range(args.seeds)), options, args.workers, args.ray_address)
-    command = "python -m sb3_mpail.benchmark " + " ".join(
+    command = "python -m benchmarks.runner " + " ".join(
         [f"--envs {' '.join(args.envs)}", f"--algos {' '.join(args.algos)}", f"--demos {' '.join(map(str, args.demos))}",
          f"--seeds {args.seeds}"]
         + ([f"--timesteps {args.timesteps}"] if args.timesteps is not None else [])
