@@ -56,7 +56,8 @@ def test_every_imported_package_is_declared():
     for module, files in sorted(imported_modules().items()):
         if module in UNDECLARED_ON_PURPOSE:
             continue
-        providers = {normalise(name) for name in distributions.get(module, [])} or {NOT_INSTALLED.get(module, module)}
+        installed = distributions.get(module) or [NOT_INSTALLED.get(module, module)]
+        providers = {normalise(name) for name in installed}
         if not providers & declared:
             undeclared[module] = (sorted(providers), sorted(files))
     assert not undeclared, f"imported but not declared in pyproject.toml (module: distributions, files): {undeclared}"
