@@ -1,9 +1,14 @@
 """
-rl_zoo3's own ``train`` and ``enjoy`` with MPAIL registered in its algorithm table (needs the ``zoo`` extra).
+rl_zoo3's own ``train``, ``enjoy`` and ``record_video`` with MPAIL registered in its algorithm table (needs the ``zoo``
+extra).
 
     python -m sb3_mpail.zoo train --algo mpail --env Pendulum-v1          # the shipped hyperparameters (HYPERPARAMS)
     python -m sb3_mpail.zoo train --algo mpail --env Pendulum-v1 -conf my_mpail.yml
     python -m sb3_mpail.zoo enjoy --algo mpail --env Pendulum-v1 -f logs/ --no-render
+    python -m sb3_mpail.zoo record_video --algo mpail --env sb3_mpail/Navigation-v0 -f logs/ -n 100
+
+``record_video`` writes an mp4 under ``logs/mpail/<run>/videos/`` (SB3's ``VecVideoRecorder``, which needs moviepy:
+the ``video`` extra).
 
 ``sb3-mpail-zoo`` is the same command as an installed console script. Hyperparameter files follow rl_zoo3's YAML
 layout; ``demos:`` is passed to :class:`~sb3_mpail.MPAIL` like any other constructor argument (a shipped demo set's
@@ -11,6 +16,7 @@ name or a path), and the logs land in the zoo's layout, so its plotting scripts 
 """
 
 import argparse
+import runpy
 import sys
 from pathlib import Path
 from typing import List, Sequence
@@ -60,8 +66,13 @@ def main() -> None:
     """Runs rl_zoo3's command line (``sys.argv``) with MPAIL registered and its shipped hyperparameters as default."""
     rl_zoo3 = _import_rl_zoo3()
     register()
-    sys.argv[1:] = with_default_hyperparams(sys.argv[1:])
-    rl_zoo3.cli.main()
+    if sys.argv[1:2] == ["record_video"]:
+        # rl_zoo3's record_video is a script (no function to call, and not in its cli): run it as one
+        del sys.argv[1]
+        runpy.run_module("rl_zoo3.record_video", run_name="__main__", alter_sys=True)
+    else:
+        sys.argv[1:] = with_default_hyperparams(sys.argv[1:])
+        rl_zoo3.cli.main()
 
 
 if __name__ == "__main__":

@@ -27,6 +27,7 @@ def test_ant_without_mujoco_says_what_to_install(monkeypatch):
 
 
 def test_ant_passes_sb3_check_env_with_float32_observations_and_200_step_episodes():
+    pytest.importorskip("mujoco", reason="the Ant needs mujoco (the scenarios extra)")
     env = gym.make(ANT_ID)
     check_env(env, warn=True)
     assert env.observation_space.shape == (27,) and env.observation_space.dtype == np.float32
@@ -34,6 +35,7 @@ def test_ant_passes_sb3_check_env_with_float32_observations_and_200_step_episode
 
 
 def test_ant_evaluation_reports_the_forward_speed_the_observation_carries():
+    pytest.importorskip("mujoco", reason="the Ant needs mujoco (the scenarios extra)")
     figures = evaluate_ant(FixedAction(), n_episodes=1, seed=0)
     # the mean of the torso's x velocity over an episode in the observation matches the env's reported x velocity
     env = gym.make(ANT_ID)

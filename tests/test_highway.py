@@ -97,7 +97,8 @@ def test_parking_env_numpy_observation_equals_parking_v0s_own():
         assert observation.tolist() == [*expected["observation"], *expected["desired_goal"]]
         action = rng.uniform(-1, 1, size=2).astype(np.float32)
         observation, reward, terminated, truncated, info = ours.step(action)
-        expected, expected_reward, *expected_ends, expected_info = theirs.step(action)
+        # ours steps highway-env with the action in float64 (numpy 2 would keep a float32 action's precision)
+        expected, expected_reward, *expected_ends, expected_info = theirs.step(action.astype(np.float64))
         assert (reward, terminated, truncated) == (expected_reward, *expected_ends)
         assert (info["is_success"], info["crashed"]) == (expected_info["is_success"], expected_info["crashed"])
         if terminated or truncated:

@@ -14,6 +14,12 @@ from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, PointMassDynamics, make_dy
 POINT_MAZE_ID = "sb3_mpail/PointMaze-v0"
 
 
+def skip_without_point_maze() -> None:
+    """Skips the test when gymnasium-robotics or mujoco is missing (the former can fail on the latter's absence)."""
+    pytest.importorskip("mujoco", reason="PointMaze needs mujoco (the scenarios extra)")
+    pytest.importorskip("gymnasium_robotics", reason="PointMaze needs gymnasium-robotics (the scenarios extra)")
+
+
 @pytest.mark.parametrize("missing", ["gymnasium_robotics", "mujoco"])
 def test_point_maze_without_gymnasium_robotics_says_what_to_install(monkeypatch, missing):
     monkeypatch.setitem(sys.modules, missing, None)  # importing it now fails as if it were not installed
@@ -41,7 +47,7 @@ def test_point_mass_model_clips_speed_and_actions_and_holds_the_goal():
 
 
 def test_point_maze_env_passes_check_env():
-    pytest.importorskip("gymnasium_robotics")
+    skip_without_point_maze()
     from gymnasium.utils.env_checker import check_env as gymnasium_check_env
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
@@ -52,7 +58,7 @@ def test_point_maze_env_passes_check_env():
 
 
 def test_point_maze_starts_in_the_bottom_left_cell_with_the_goal_top_left():
-    pytest.importorskip("gymnasium_robotics")
+    skip_without_point_maze()
     env = gym.make(POINT_MAZE_ID)
     for seed in range(5):
         observation, _ = env.reset(seed=seed)
@@ -63,7 +69,7 @@ def test_point_maze_starts_in_the_bottom_left_cell_with_the_goal_top_left():
 
 
 def test_point_mass_model_predicts_mujoco_off_the_walls_and_not_on_them():
-    pytest.importorskip("gymnasium_robotics")
+    skip_without_point_maze()
     env = gym.make(POINT_MAZE_ID).unwrapped
     model = PointMassDynamics()
     rng = np.random.default_rng(0)
@@ -84,7 +90,7 @@ def test_point_mass_model_predicts_mujoco_off_the_walls_and_not_on_them():
 
 
 def test_shipped_maze_demos_reach_the_goal_without_touching_the_walls():
-    pytest.importorskip("gymnasium_robotics")
+    skip_without_point_maze()
     demos = SHIPPED_DEMO_DIR / "pointmaze_4.npz"
     with np.load(demos) as data:
         episodes = data["obs"]

@@ -61,6 +61,7 @@ def test_ant_mpail_om_trains_with_the_shipped_zoo_entry_learning_the_27d_model_o
 
 
 def test_point_maze_trains_with_the_shipped_zoo_entry_planning_through_the_wall_free_point_mass(tmp_path):
+    pytest.importorskip("mujoco")
     pytest.importorskip("gymnasium_robotics")
     model = zoo_train("sb3_mpail/PointMaze-v0", 400, tmp_path)
     assert isinstance(model.policy.dynamics, PointMassDynamics)

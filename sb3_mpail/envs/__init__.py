@@ -29,7 +29,7 @@ if "sb3_mpail/ContinuousCartPole-v0" not in gym.registry:
 if "sb3_mpail/NavigationLap-v0" not in gym.registry:
     gym.register(
         id="sb3_mpail/NavigationLap-v0",
-        entry_point="sb3_mpail.envs.navigation:NavigationEnv",
+        entry_point="sb3_mpail.envs.lap:NavigationLapEnv",
         max_episode_steps=240,
     )
 

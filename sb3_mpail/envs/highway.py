@@ -123,7 +123,7 @@ class FlatParkingEnv(gym.Env):
         self.render_mode = render_mode
         self.dtype = dtype
         # Generous finite bounds (observation units): positions 1 km, speeds 50 m/s (highway-env caps them near 40).
-        high = np.tile([10.0, 10.0, 10.0, 10.0, 1.0, 1.0], 2)
+        high = np.tile(np.array([10.0, 10.0, 10.0, 10.0, 1.0, 1.0], dtype=dtype), 2)
         self.observation_space = spaces.Box(-high, high, dtype=dtype)
         self.action_space = self.parking.action_space
 
@@ -138,7 +138,8 @@ class FlatParkingEnv(gym.Env):
         return self._flatten(observation), info
 
     def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:
-        observation, reward, terminated, truncated, info = self.parking.step(action)
+        # float64, as numpy 1 computed it: numpy 2 keeps highway-env's action mapping in a float32 action's precision
+        observation, reward, terminated, truncated, info = self.parking.step(np.asarray(action, dtype=np.float64))
         return self._flatten(observation), float(reward), terminated, truncated, info
 
     def render(self) -> Optional[np.ndarray]:

@@ -88,7 +88,7 @@ class EgoRoadEnv(gym.Env):
         self.render_mode = render_mode
         self.dtype = dtype
         # Generous finite bounds (observation units): positions 10 km, speeds 50 m/s (highway-env caps them at 40).
-        high = np.array([1000.0, 1000.0, 5.0, 5.0, 1.0, 1.0])
+        high = np.array([1000.0, 1000.0, 5.0, 5.0, 1.0, 1.0], dtype=dtype)
         self.observation_space = spaces.Box(-high, high, dtype=dtype)
         self.action_space = self.road_env.action_space
 
@@ -100,7 +100,8 @@ class EgoRoadEnv(gym.Env):
         return ego_observation(self.road_env.vehicle, self.dtype), info
 
     def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:
-        _, reward, terminated, truncated, info = self.road_env.step(action)
+        # float64, as numpy 1 computed it: numpy 2 keeps highway-env's action mapping in a float32 action's precision
+        _, reward, terminated, truncated, info = self.road_env.step(np.asarray(action, dtype=np.float64))
         return ego_observation(self.road_env.vehicle, self.dtype), float(reward), terminated, truncated, info
 
     def render(self) -> Optional[np.ndarray]:

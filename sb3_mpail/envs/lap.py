@@ -4,23 +4,52 @@ observed demo scenario (the paper's real-sim-real experiment in simulation).
 
 The track is a circle of :data:`TRACK_RADIUS` through the origin, centred at ``(0, TRACK_RADIUS)``, driven
 counter-clockwise from the navigation env's default start (near the origin, heading about +x): one lap at 1 m/s
-takes :data:`LAP_STEPS` (240) steps of 0.1 s. ``sb3_mpail/NavigationLap-v0`` is the navigation env cut at 240 steps.
+takes :data:`LAP_STEPS` (240) steps of 0.1 s. ``sb3_mpail/NavigationLap-v0`` is the navigation env cut at 240 steps
+(:class:`NavigationLapEnv`, whose picture draws the track).
 The demo records only :data:`DEMO_FEATURES` of the observation (position and body-frame velocity) with sensor noise.
 """
 
 import math
-from typing import Callable, Dict
+from typing import Any, Callable, Dict, Optional
 
 import gymnasium as gym
 import numpy as np
 
-from sb3_mpail.envs.navigation import MAX_SPEED, MAX_STEER, WHEELBASE
+from sb3_mpail.envs.navigation import MAX_SPEED, MAX_STEER, WHEELBASE, NavigationEnv
 
 LAP_STEPS = 240
 LAP_SPEED = 1.0  # m/s
 TRACK_RADIUS = LAP_SPEED * LAP_STEPS * 0.1 / (2 * math.pi)  # m, one lap in LAP_STEPS steps at LAP_SPEED
 DEMO_FEATURES = (0, 1, 6, 7)  # x, y, body-frame vx, vy
 LOOKAHEAD = 0.5  # m, pure-pursuit lookahead of the lap driver
+
+
+def track_points(n_points: int = LAP_STEPS) -> np.ndarray:
+    """
+    The track, counter-clockwise from the origin and closed (its last point is its first).
+
+    :param n_points: points around the circle
+    :return: ``(n_points + 1, 2)`` positions ``(x, y)`` in metres
+    """
+    angles = np.linspace(-math.pi / 2, 3 * math.pi / 2, n_points + 1)
+    return np.stack((TRACK_RADIUS * np.cos(angles), TRACK_RADIUS * (1.0 + np.sin(angles))), axis=-1)
+
+
+class NavigationLapEnv(NavigationEnv):
+    """
+    The navigation env for the lap (``sb3_mpail/NavigationLap-v0``): the same car, start, observation and reward;
+    its ``rgb_array`` picture draws the track (the default reference path) and no goal.
+
+    :param render_mode: ``None`` or ``"rgb_array"``
+    :param reference_paths: polylines to draw (default: the track, :func:`track_points`)
+    :param kwargs: :class:`~sb3_mpail.envs.navigation.NavigationEnv`'s other parameters
+    """
+
+    render_goal = False
+
+    def __init__(self, render_mode: Optional[str] = None, reference_paths: Optional[Any] = None, **kwargs: Any):
+        paths = [track_points()] if reference_paths is None else reference_paths
+        super().__init__(render_mode=render_mode, reference_paths=paths, **kwargs)
 
 
 def lap_driver(observation: np.ndarray) -> np.ndarray:

@@ -41,9 +41,10 @@ def require_gymnasium_robotics() -> None:
     :raises ImportError: naming the extra to install when either is missing
     """
     try:
-        import gymnasium_robotics  # noqa: F401
         import mujoco  # noqa: F401
-    except ImportError as error:
+        import gymnasium_robotics  # noqa: F401  # isort: skip
+    # gymnasium-robotics 1.3+ raise gymnasium's DependencyNotInstalled, no ImportError, when mujoco is missing
+    except (ImportError, gym.error.DependencyNotInstalled) as error:
         raise ImportError(
             f"This scenario needs gymnasium-robotics and mujoco, which are not installed: {SCENARIOS_INSTALL_HINT}"
         ) from error

@@ -8,7 +8,7 @@ which is the setting of the MPAIL navigation experiment.
 """
 
 import math
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Optional, Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -25,6 +25,17 @@ DT = 0.1  # s per env step
 REWARD_OFFSET = math.sqrt(10.0**2 + 10.0**2)
 
 OOD_HALF_WIDTH = 20.0  # m, half-width of the out-of-distribution start box
+
+# The top-down picture of ``render_mode="rgb_array"``: RGB colours and sizes
+RENDER_SIZE = 400  # pixels, width and height
+BACKGROUND_COLOUR = (245, 245, 245)
+GRID_COLOUR = (222, 222, 222)
+PATH_COLOUR = (120, 165, 230)  # the reference paths (demos, track)
+TRAIL_COLOUR = (240, 150, 60)  # where the car has driven this episode
+GOAL_COLOUR = (40, 170, 70)
+CAR_COLOUR = (200, 30, 30)
+CAR_FRONT_COLOUR = (255, 210, 0)
+CAR_LENGTH, CAR_WIDTH = 0.5, 0.28  # m, drawn at least 16 x 9 pixels
 
 
 class NavigationEnv(gym.Env):
@@ -50,9 +61,16 @@ class NavigationEnv(gym.Env):
     :param roll_gain: Steady-state roll per unit lateral acceleration (rad s^2/m).
     :param pitch_gain: Steady-state pitch per unit longitudinal acceleration (rad s^2/m).
     :param suspension_time_constant: Time constant (s) of the roll and pitch response.
+    :param render_mode: ``None`` or ``"rgb_array"``: :meth:`render` returns a top-down ``(400, 400, 3)`` uint8 picture
+        of the car (red, its front yellow), the goal (green), the reference paths (blue) and the car's trail this
+        episode (orange), framed on them and the car's start, widened when the car drives out of the frame.
+    :param reference_paths: polylines drawn under the car, each ``(m, 2)`` positions ``(x, y)`` in metres, e.g. the
+        demos' paths (``[demo[:, :2] for demo in demos]``).
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": round(1 / DT)}
+    #: whether the picture shows the goal (the lap env, which follows a track, does not)
+    render_goal: ClassVar[bool] = True
 
     def __init__(
         self,
@@ -66,8 +84,16 @@ class NavigationEnv(gym.Env):
         roll_gain: float = 0.008,
         pitch_gain: float = 0.005,
         suspension_time_constant: float = 0.1,
+        render_mode: Optional[str] = None,
+        reference_paths: Optional[Sequence[Any]] = None,
     ) -> None:
         super().__init__()
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"Unsupported render_mode {render_mode!r}; choose None or {self.metadata['render_modes']}.")
+        self.render_mode = render_mode
+        self.reference_paths = [np.asarray(path, dtype=np.float64).reshape(-1, 2) for path in reference_paths or ()]
+        self._trail: list[tuple[float, float]] = []  # recorded only when rendering
+        self._view: Optional[tuple[float, float, float]] = None  # left, top (m) and pixels per metre
         self._check_start_region(start_region)
         self.start_region = start_region
         self.goal = (float(goal[0]), float(goal[1]))
@@ -141,6 +167,8 @@ class NavigationEnv(gym.Env):
         self._roll = self._pitch = 0.0
         self._speed = self._steer = self._vy = 0.0
         self._roll_rate = self._pitch_rate = self._yaw_rate = 0.0
+        if self.render_mode is not None:
+            self._trail, self._view = [(self._x, self._y)], None
         return self._get_obs(), {"distance_to_goal": self._distance_to_goal()}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -180,6 +208,8 @@ class NavigationEnv(gym.Env):
         self._roll, self._pitch = roll, pitch
         self._speed, self._steer, self._vy = speed, steer, vy
         self._roll_rate, self._pitch_rate, self._yaw_rate = roll_rate, pitch_rate, yaw_rate
+        if self.render_mode is not None:
+            self._trail.append((x, y))
 
         distance = self._distance_to_goal()
         return self._get_obs(), REWARD_OFFSET - distance, False, False, {"distance_to_goal": distance}
@@ -216,3 +246,123 @@ class NavigationEnv(gym.Env):
             ],
             dtype=np.float32,
         )
+
+    def render(self) -> Optional[np.ndarray]:
+        """The top-down picture (see the ``render_mode`` parameter), or ``None`` without ``render_mode="rgb_array"``.
+
+        :return: ``(400, 400, 3)`` uint8 RGB image; +x points right and +y up.
+        """
+        if self.render_mode != "rgb_array":
+            return None
+        image = np.empty((RENDER_SIZE, RENDER_SIZE, 3), dtype=np.uint8)
+        image[:] = BACKGROUND_COLOUR
+        trail = np.array(self._trail or [(self._x, self._y)], dtype=np.float64)
+        left, top, scale = self._frame(trail)
+        size = RENDER_SIZE / scale  # m
+
+        def to_pixels(points: np.ndarray) -> np.ndarray:
+            """World ``(x, y)`` in metres to pixel ``(column, row)``."""
+            return np.stack(((points[:, 0] - left) * scale, (top - points[:, 1]) * scale), axis=-1)
+
+        spacing = 1.0 if scale >= 20.0 else 5.0 if scale >= 4.0 else 25.0  # m between grid lines
+        for x in np.arange(math.ceil(left / spacing) * spacing, left + size, spacing):
+            image[:, min(int(round((x - left) * scale)), RENDER_SIZE - 1)] = GRID_COLOUR
+        for y in np.arange(math.ceil((top - size) / spacing) * spacing, top, spacing):
+            image[min(int(round((top - y) * scale)), RENDER_SIZE - 1), :] = GRID_COLOUR
+        for path in self.reference_paths:
+            _draw_polyline(image, to_pixels(path), PATH_COLOUR, radius=1)
+        _draw_polyline(image, to_pixels(trail), TRAIL_COLOUR, radius=0)
+        if self.render_goal:
+            goal = to_pixels(np.array([self._episode_goal]))[0]
+            _draw_disk(image, goal, max(0.25 * scale, 6.0), GOAL_COLOUR)
+        self._draw_car(image, left, top, scale)
+        return image
+
+    def _frame(self, trail: np.ndarray) -> tuple[float, float, float]:
+        """The episode's view: a square on the start, the goal, the paths and the trail, widened when the car leaves it.
+
+        :param trail: ``(n, 2)`` positions driven this episode, the car's current one last
+        :return: left and top edges (m) and the scale (pixels per metre)
+        """
+        if self._view is not None:
+            left, top, scale = self._view
+            size, (x, y) = RENDER_SIZE / scale, trail[-1]
+            if left + 0.5 <= x <= left + size - 0.5 and top - size + 0.5 <= y <= top - 0.5:
+                return self._view
+        points = [trail]
+        if self.render_goal:
+            points.append(np.array([self._episode_goal]))
+        points.extend(self.reference_paths)
+        points = np.concatenate(points)
+        low, high = points.min(axis=0) - 1.5, points.max(axis=0) + 1.5
+        half_size = max(float((high - low).max()) / 2, 2.0)
+        centre = (low + high) / 2
+        self._view = (float(centre[0] - half_size), float(centre[1] + half_size), RENDER_SIZE / (2 * half_size))
+        return self._view
+
+    def _draw_car(self, image: np.ndarray, left: float, top: float, scale: float) -> None:
+        """Draws the car: a rectangle along its heading, red with a yellow front.
+
+        :param image: the picture to draw in
+        :param left: left edge of the view (m)
+        :param top: top edge of the view (m)
+        :param scale: pixels per metre
+        """
+        length, width = max(CAR_LENGTH, 16.0 / scale), max(CAR_WIDTH, 9.0 / scale)
+        column, row = (self._x - left) * scale, (top - self._y) * scale
+        reach = int(math.ceil(0.5 * math.hypot(length, width) * scale)) + 1
+        rows = np.arange(max(int(row) - reach, 0), min(int(row) + reach + 1, RENDER_SIZE))
+        columns = np.arange(max(int(column) - reach, 0), min(int(column) + reach + 1, RENDER_SIZE))
+        if len(rows) == 0 or len(columns) == 0:
+            return
+        # pixel centres in the car's frame (m): along its heading and to its left
+        dx = (columns[None, :] + 0.5 - column) / scale
+        dy = (row - rows[:, None] - 0.5) / scale
+        cos_yaw, sin_yaw = math.cos(self._yaw), math.sin(self._yaw)
+        along, across = dx * cos_yaw + dy * sin_yaw, -dx * sin_yaw + dy * cos_yaw
+        body = (np.abs(along) <= length / 2) & (np.abs(across) <= width / 2)
+        window = image[rows[0] : rows[-1] + 1, columns[0] : columns[-1] + 1]
+        window[body] = CAR_COLOUR
+        window[body & (along >= 0.25 * length)] = CAR_FRONT_COLOUR
+
+
+def _draw_polyline(image: np.ndarray, points: np.ndarray, colour: tuple[int, int, int], radius: int) -> None:
+    """Draws a polyline through pixel positions, ``2 * radius + 1`` pixels wide; what falls outside is clipped.
+
+    :param image: ``(height, width, 3)`` picture
+    :param points: ``(n, 2)`` pixel positions ``(column, row)``
+    :param colour: RGB
+    :param radius: half-width in pixels
+    """
+    if len(points) > 1:
+        segments = np.diff(points, axis=0)
+        counts = np.maximum(np.ceil(np.abs(segments).max(axis=1) * 2).astype(int), 1)  # two samples per pixel
+        counts = np.minimum(counts, 4 * RENDER_SIZE)  # a segment far longer than the view is sampled as if clipped
+        segment = np.repeat(np.arange(len(segments)), counts)
+        fraction = (np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)) / np.repeat(counts, counts)
+        points = np.concatenate((points[segment] + segments[segment] * fraction[:, None], points[-1:]))
+    height, width = image.shape[:2]
+    columns, rows = np.floor(points[:, 0]).astype(int), np.floor(points[:, 1]).astype(int)
+    for row_offset in range(-radius, radius + 1):
+        for column_offset in range(-radius, radius + 1):
+            r, c = rows + row_offset, columns + column_offset
+            inside = (r >= 0) & (r < height) & (c >= 0) & (c < width)
+            image[r[inside], c[inside]] = colour
+
+
+def _draw_disk(image: np.ndarray, centre: np.ndarray, radius: float, colour: tuple[int, int, int]) -> None:
+    """Draws a filled disk; what falls outside is clipped.
+
+    :param image: ``(height, width, 3)`` picture
+    :param centre: pixel position ``(column, row)``
+    :param radius: radius in pixels
+    :param colour: RGB
+    """
+    height, width = image.shape[:2]
+    column, row = float(centre[0]), float(centre[1])
+    rows = np.arange(max(int(row - radius), 0), min(int(row + radius) + 1, height))
+    columns = np.arange(max(int(column - radius), 0), min(int(column + radius) + 1, width))
+    if len(rows) == 0 or len(columns) == 0:
+        return
+    inside = (rows[:, None] + 0.5 - row) ** 2 + (columns[None, :] + 0.5 - column) ** 2 <= radius**2
+    image[rows[0] : rows[-1] + 1, columns[0] : columns[-1] + 1][inside] = colour
