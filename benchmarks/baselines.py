@@ -50,7 +50,7 @@ from torch.nn import functional as F
 from torch.nn.utils.parametrizations import spectral_norm
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
-from sb3_mpail.demos import DemoSource, list_shipped_demos, load_demos, shipped_demo_info, shipped_demos
+from sb3_mpail.demos import DemoSource, list_shipped_demos, load_demos, shipped_demos
 from sb3_mpail.envs import cartpole
 from sb3_mpail.mppi.costs import FeatureSelection, make_transition_discriminator
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, PendulumDynamics
@@ -157,26 +157,6 @@ def load_config(algo: str, env_id: str, config_dir: Optional[Path] = None) -> Di
             if entry[key] != entry["gail"][key]:
                 raise ValueError(f"irl_mpc.yml's {key} for {env_id} must equal gail.yml's (IRL-MPC deploys that run).")
     return entry
-
-
-def expert_stats(env_id: str) -> Dict[str, Any]:
-    """
-    The env's shipped demo information: the expert's and the random policy's mean returns (the normalised score's
-    1 and 0).
-
-    :param env_id: gymnasium id
-    """
-    return shipped_demo_info(env_name_of(env_id))
-
-
-def demo_set_name(env_id: str, n_demos: int) -> str:
-    """
-    The shipped demo set of ``n_demos`` episodes of ``env_id``, e.g. ``navigation_4``.
-
-    :param env_id: gymnasium id or short name
-    :param n_demos: episodes in the set
-    """
-    return f"{env_name_of(env_id_of(env_id))}_{n_demos}"
 
 
 def action_demos_path(demos: Path | str, directory: Path = ACTION_DEMO_DIR) -> Path:
@@ -621,7 +601,7 @@ def train_baseline(
 
     :param algo: one of :data:`ALGOS`
     :param env_id: gymnasium id or short name
-    :param demos: a shipped demo set, ``<env>_<n>`` (:func:`demo_set_name`; BC reads its ``_actions`` twin)
+    :param demos: a shipped demo set, ``<prefix>_<n>`` (BC reads its ``_actions`` twin)
     :param seed: training seed (envs, networks, planner noise)
     :param hyperparams: :func:`load_config`'s entry (``n_timesteps`` and ``n_envs`` are the budget)
     :param eval_every: env steps between ``on_eval`` calls; BC, which has no env steps, is evaluated once at step 0

@@ -31,19 +31,11 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import torch as th
 
-from benchmarks.baselines import (
-    ALGO_LABELS,
-    ALGOS,
-    demo_set_name,
-    env_id_of,
-    env_name_of,
-    expert_stats,
-    load_config,
-    train_baseline,
-)
+from benchmarks.baselines import ALGO_LABELS, ALGOS, ENV_NAMES, env_id_of, env_name_of, load_config, train_baseline
 from benchmarks.report import BENCHMARKS_FILE, machine_description, write_section
 from benchmarks.scenarios import RESULTS as SCENARIO_RESULTS
 from benchmarks.scenarios import SCENARIOS, lap_figures
+from sb3_mpail.demos import list_shipped_demos, shipped_demo_info
 from sb3_mpail.envs.navigation import REWARD_OFFSET
 from sb3_mpail.evaluation import evaluate_episodes, normalised_score
 
@@ -61,36 +53,53 @@ LAP = "sb3_mpail/NavigationLap-v0"
 LAP_FIGURES = ("cte_mean", "cte_max", "speed")
 
 
-def grid_name(env_id: str, timesteps: Optional[int] = None) -> str:
+def grid_of(env: str) -> Tuple[str, str]:
     """
-    The name of an env's grid (its results folder, report sections and figures): ``navigation``, or
-    ``navigation_200000steps`` when ``--timesteps`` overrides every budget.
+    The demo sets and env of a grid: an env (id or short name) trains on its own shipped sets, ``<env>_<n>``; the
+    name of other shipped sets of an env (e.g. ``navigation_circling``) trains on those, in the env their information
+    file names.
 
-    :param env_id: gymnasium id
+    :param env: an env id, an env's short name or a shipped demo-set prefix
+    :return: the demo-set prefix and the gymnasium id
+    """
+    if any(name.rsplit("_", 1)[0] == env for name in list_shipped_demos()) and env not in ENV_NAMES.values():
+        return env, shipped_demo_info(env)["env_id"]
+    env_id = env_id_of(env)
+    return env_name_of(env_id), env_id
+
+
+def grid_name(demo_set: str, timesteps: Optional[int] = None) -> str:
+    """
+    The name of a grid (its results folder, report sections and figures): its demo sets' prefix, e.g. ``navigation``,
+    or ``navigation_200000steps`` when ``--timesteps`` overrides every budget.
+
+    :param demo_set: the shipped demo sets' prefix (:func:`grid_of`)
     :param timesteps: the override, or ``None`` for the configs' budgets
     """
-    return env_name_of(env_id) + ("" if timesteps is None else f"_{timesteps}steps")
+    return demo_set + ("" if timesteps is None else f"_{timesteps}steps")
 
 
-def result_path(results_dir: Path, env_id: str, algo: str, n_demos: int, seed: int, timesteps: Optional[int] = None) -> Path:
+def result_path(
+    results_dir: Path, demo_set: str, algo: str, n_demos: int, seed: int, timesteps: Optional[int] = None
+) -> Path:
     """
     Where a run's result goes.
 
     :param results_dir: the grid's folder
-    :param env_id: gymnasium id
+    :param demo_set: the shipped demo sets' prefix (:func:`grid_of`)
     :param algo: one of :data:`~benchmarks.baselines.ALGOS`
     :param n_demos: demo count
     :param seed: training seed
     :param timesteps: the budget override, or ``None``
     """
-    return Path(results_dir) / grid_name(env_id, timesteps) / f"{algo}_{n_demos}demos_seed{seed}.json"
+    return Path(results_dir) / grid_name(demo_set, timesteps) / f"{algo}_{n_demos}demos_seed{seed}.json"
 
 
 def make_jobs(envs: Sequence[str], algos: Sequence[str], demos: Sequence[int], seeds: Sequence[int]) -> List[Dict[str, Any]]:
     """
     The grid's training runs, seed by seed; GAIL and IRL-MPC share one run (``algos`` lists what a job reports).
 
-    :param envs: env ids or short names
+    :param envs: env ids, short names or shipped demo-set prefixes (:func:`grid_of`)
     :param algos: algorithms
     :param demos: demo counts
     :param seeds: training seeds
@@ -98,7 +107,7 @@ def make_jobs(envs: Sequence[str], algos: Sequence[str], demos: Sequence[int], s
     shared = tuple(algo for algo in ("gail", "irl_mpc") if algo in algos)
     groups = [(algo,) for algo in ALGOS if algo in algos and algo not in shared] + ([shared] if shared else [])
     return [
-        dict(env_id=env_id_of(env), algos=group, n_demos=n_demos, seed=seed)
+        dict(env_id=grid_of(env)[1], demo_set=grid_of(env)[0], algos=group, n_demos=n_demos, seed=seed)
         for env in envs
         for n_demos in demos
         for seed in seeds
@@ -114,7 +123,7 @@ def job_paths(job: Dict[str, Any], options: Dict[str, Any]) -> Dict[str, Path]:
     :param options: :func:`run_job`'s options
     """
     return {
-        algo: result_path(options["results_dir"], job["env_id"], algo, job["n_demos"], job["seed"], options.get("timesteps"))
+        algo: result_path(options["results_dir"], job["demo_set"], algo, job["n_demos"], job["seed"], options.get("timesteps"))
         for algo in job["algos"]
     }
 
@@ -129,7 +138,7 @@ def curve_point(predictor: Any, env_id: str, steps: int, n_episodes: int, stats:
     :param steps: env steps trained so far
     :param n_episodes: evaluation episodes, env ``i`` reset with ``EVAL_SEED + i`` (not the lap's: its lap count is
         the scenario's)
-    :param stats: :func:`~benchmarks.baselines.expert_stats`
+    :param stats: the demo sets' information (:func:`~sb3_mpail.demos.shipped_demo_info`)
     """
     if env_id == LAP:
         figures = lap_figures(predictor, stats, SCENARIOS["lap"].n_eval_episodes)
@@ -158,7 +167,7 @@ def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
     hyperparams = load_config(algo, env_id, options["config_dir"])
     budget = hyperparams["n_timesteps"] if options["timesteps"] is None else options["timesteps"]
     eval_every = options["eval_every"] or max(1, budget // 10)
-    stats = expert_stats(env_id)
+    stats = shipped_demo_info(job["demo_set"])
     curves: Dict[str, List[Tuple[float, ...]]] = {name: [] for name in algos}
     finals: Dict[str, Any] = {}
 
@@ -169,7 +178,7 @@ def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
                 finals[name] = predictor
 
     start = time.perf_counter()
-    train_baseline(algo, env_id, demo_set_name(env_id, n_demos), seed, hyperparams, eval_every, on_eval, budget)
+    train_baseline(algo, env_id, f"{job['demo_set']}_{n_demos}", seed, hyperparams, eval_every, on_eval, budget)
     seconds = time.perf_counter() - start
     for name, path in paths.items():
         result: Dict[str, Any] = dict(
@@ -186,6 +195,7 @@ def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
                                          env_kwargs=dict(start_region="ood"), record_observations=True)  # fmt: skip
             final_rewards = np.array([REWARD_OFFSET - info["distance_to_goal"] for info in episodes.final_infos])
             result["ood"] = dict(
+                start_poses=[[float(obs[0][0]), float(obs[0][1]), float(obs[0][5])] for obs in episodes.observations],
                 final_positions=[[float(obs[-1][0]), float(obs[-1][1])] for obs in episodes.observations],
                 final_rewards=final_rewards.tolist(),
                 reached=float(np.mean(REWARD_OFFSET - final_rewards <= GOAL_RADIUS)),
@@ -500,8 +510,8 @@ def write_report(
     :param figures_dir: folder of the figures
     """
     for env in envs:
-        env_id = env_id_of(env)
-        name, stats = grid_name(env_id, timesteps), expert_stats(env_id)
+        demo_set, env_id = grid_of(env)
+        name, stats = grid_name(demo_set, timesteps), shipped_demo_info(demo_set)
         results = load_results(results_dir, name)
         # every stored result of the grid, not only the runs asked for now: a partial rerun keeps the other rows
         grid_algos = [algo for algo in ALGOS if algo in algos or any(r["algo"] == algo for r in results)]
@@ -517,7 +527,7 @@ def write_report(
         budgets = {algo: sorted({r["n_timesteps"] for r in results if r["algo"] == algo}) for algo in grid_algos}
         figures = [plot_curves(results, env_id, n, figures_dir / f"baselines_{name}_{n}demos.png") for n in grid_demos]
         lines = [
-            f"## Baselines on {env_id}",
+            f"## Baselines on {env_id}" + ("" if demo_set == env_name_of(env_id) else f", demos {demo_set}_<n>"),
             "",
             f"Normalised score = (R - random) / (expert - random), random {stats['random_return_mean']:.1f}, expert "
             f"{stats['expert_return_mean']:.1f} ({stats['expert_algo']}); final deterministic evaluation on "

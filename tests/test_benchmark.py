@@ -84,7 +84,7 @@ def test_ray_is_optional_and_named_when_missing(tmp_path, monkeypatch):
         return real_import(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", no_ray)
-    job = dict(env_id="Pendulum-v1", algos=("bc",), n_demos=4, seed=0)
+    job = dict(env_id="Pendulum-v1", demo_set="pendulum", algos=("bc",), n_demos=4, seed=0)
     with pytest.raises(SystemExit, match="pip install"):
         runner.run_grid([job], dict(results_dir=tmp_path, threads=1), ray_address="auto")
 
