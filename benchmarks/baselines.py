@@ -3,6 +3,8 @@ The algorithms of the benchmark grid, trained on the same observation-only demos
 built on the ``imitation`` library and Stable-Baselines3:
 
 * ``mpail``: :class:`~sb3_mpail.MPAIL`.
+* ``mpail_om``: MPAIL-OM, :class:`~sb3_mpail.MPAIL` planning through a dynamics model learned online from its own
+  transitions (``dynamics="learned"``), no prior model: as much information as GAIL has.
 * ``gail``: imitation's GAIL, PPO generator, state-only discriminator ``d(s, s')`` (MPAIL's discriminator,
   :func:`~sb3_mpail.mppi.costs.make_transition_discriminator`; dummy zero actions in the demos, never read). With
   ``reward_net_kwargs`` ``features=[...]`` it sees only those state dimensions (:class:`FeatureSelectingRewardNet`),
@@ -63,10 +65,11 @@ ACTION_DEMO_DIR = Path(__file__).resolve().parent / "action_demos"
 #: the scripts that made the shipped demos
 DEMO_SCRIPT_DIR = Path(__file__).resolve().parent.parent / "demos"
 
-ALGOS: Tuple[str, ...] = ("mpail", "gail", "airl", "bc", "irl_mpc")
+ALGOS: Tuple[str, ...] = ("mpail", "mpail_om", "gail", "airl", "bc", "irl_mpc")
 #: names used in every table and figure
 ALGO_LABELS: Dict[str, str] = {
     "mpail": "MPAIL",
+    "mpail_om": "MPAIL-OM (dynamics learned online)",
     "gail": "GAIL (state-only)",
     "airl": "AIRL (obs-only)",
     "bc": "BC (uses expert actions)",
@@ -540,17 +543,18 @@ class _RolloutEvalCallback(BaseCallback):
     evaluation is left to the caller, after ``learn`` returns.
     """
 
-    def __init__(self, schedule: _EvalSchedule, budget: int):
+    def __init__(self, schedule: _EvalSchedule, budget: int, name: str = "mpail"):
         super().__init__()
         self.schedule = schedule
         self.budget = budget
+        self.name = name
 
     def _on_step(self) -> bool:
         return True
 
     def _on_rollout_end(self) -> None:
         if self.num_timesteps < self.budget:
-            self.schedule(self.num_timesteps, lambda: {"mpail": self.model})
+            self.schedule(self.num_timesteps, lambda: {self.name: self.model})
 
 
 def train_mpail(
@@ -562,9 +566,10 @@ def train_mpail(
     hyperparams: Dict[str, Any],
     eval_every: int = 0,
     on_eval: Optional[EvalHook] = None,
+    name: str = "mpail",
 ) -> Any:
     """
-    :class:`~sb3_mpail.MPAIL` with ``mpail.yml``'s settings, evaluated at the end of rollouts.
+    :class:`~sb3_mpail.MPAIL` with ``mpail.yml``'s (or ``mpail_om.yml``'s) settings, evaluated at the end of rollouts.
 
     :param env_id: gymnasium id
     :param demos: observation-only demos
@@ -574,6 +579,7 @@ def train_mpail(
     :param hyperparams: the config entry without :data:`META_KEYS`
     :param eval_every: env steps between ``on_eval`` calls (also called at the end)
     :param on_eval: the evaluation hook
+    :param name: the algorithm's name in ``on_eval``'s dict (``mpail`` or ``mpail_om``)
     """
     from sb3_mpail.mpail import MPAIL
 
@@ -581,8 +587,8 @@ def train_mpail(
     model = MPAIL(settings.pop("policy", "MlpMPPI"), make_vec_env(env_id, n_envs=n_envs, seed=seed), demos, seed=seed,
                   device="cpu", **settings)  # fmt: skip
     schedule = _EvalSchedule(eval_every, on_eval)
-    model.learn(timesteps, callback=_RolloutEvalCallback(schedule, timesteps))
-    schedule(model.num_timesteps, lambda: {"mpail": model}, force=True)
+    model.learn(timesteps, callback=_RolloutEvalCallback(schedule, timesteps, name))
+    schedule(model.num_timesteps, lambda: {name: model}, force=True)
     return model
 
 
@@ -623,8 +629,8 @@ def train_baseline(
         if on_eval is not None:
             on_eval(0, {"bc": policy})
         return policy
-    if algo == "mpail":
-        return train_mpail(env_id, demos, timesteps, seed, n_envs, hp, eval_every, on_eval)
+    if algo in ("mpail", "mpail_om"):
+        return train_mpail(env_id, demos, timesteps, seed, n_envs, hp, eval_every, on_eval, algo)
     raise ValueError(f"Unknown algorithm {algo!r}; expected one of {ALGOS}.")
 
 

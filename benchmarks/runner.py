@@ -35,8 +35,8 @@ from benchmarks.baselines import ALGO_LABELS, ALGOS, ENV_NAMES, env_id_of, env_n
 from benchmarks.report import BENCHMARKS_FILE, machine_description, write_section
 from benchmarks.scenarios import RESULTS as SCENARIO_RESULTS
 from benchmarks.scenarios import SCENARIOS, lap_figures
-from sb3_mpail.demos import list_shipped_demos, shipped_demo_info
-from sb3_mpail.envs.navigation import REWARD_OFFSET
+from sb3_mpail.demos import list_shipped_demos, shipped_demo_info, shipped_demos
+from sb3_mpail.envs.navigation import DT, MAX_SPEED, REWARD_OFFSET
 from sb3_mpail.evaluation import evaluate_episodes, normalised_score
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
@@ -47,6 +47,9 @@ TARGET = 0.9
 EVAL_SEED, OOD_SEED = 10_000, 50_000
 #: an OOD episode "reaches the goal" when it ends within this distance of it (metres)
 GOAL_RADIUS = 2.0
+GOAL = np.array([10.0, 10.0])
+#: the farthest a car drives in a 100-step episode at its 3 m/s top speed (metres)
+MAX_TRAVEL = MAX_SPEED * DT * 100
 NAVIGATION = "sb3_mpail/Navigation-v0"
 LAP = "sb3_mpail/NavigationLap-v0"
 #: the lap's figures, in the order of its curve points after the env-step count
@@ -306,26 +309,77 @@ def grid_table(results: List[Dict[str, Any]], env_id: str, algos: Sequence[str],
     return "\n".join(lines)
 
 
+def expert_pose_gaussian(demo_set: str, n_demos: int) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    The Gaussian fitted to the expert's poses ``(x, y, cos yaw, sin yaw)`` in the demos, for the paper's OOD energy
+    ``log p_E(s)`` (its appendix, after Liu et al. 2020). The pose rather than the whole state: the car starts at rest,
+    and the expert's height and body rates are constant or nearly so, which leaves their covariance singular.
+
+    :param demo_set: the shipped demo sets' prefix
+    :param n_demos: demo count
+    :return: the mean ``(4,)`` and covariance ``(4, 4)``
+    """
+    states = np.concatenate([trajectory.obs for trajectory in shipped_demos(demo_set, n_demos)])
+    poses = np.stack([states[:, 0], states[:, 1], np.cos(states[:, 5]), np.sin(states[:, 5])], axis=1)
+    return poses.mean(axis=0), np.cov(poses, rowvar=False) + 1e-6 * np.eye(4)
+
+
+def ood_energy(start_poses: np.ndarray, gaussian: Tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """
+    ``log p_E`` of each start pose ``(x, y, yaw)`` under :func:`expert_pose_gaussian`: near 0 or above in
+    distribution, very negative far out of it.
+    """
+    mean, covariance = gaussian
+    poses = np.stack([start_poses[:, 0], start_poses[:, 1], np.cos(start_poses[:, 2]), np.sin(start_poses[:, 2])], axis=1)
+    offsets = poses - mean
+    mahalanobis = np.einsum("ni,ij,nj->n", offsets, np.linalg.inv(covariance), offsets)
+    return -0.5 * (mahalanobis + np.log(np.linalg.det(2 * np.pi * covariance)))
+
+
+def ood_measures(record: Dict[str, Any]) -> Dict[str, float]:
+    """
+    One run's OOD figures: the fraction of episodes ending within :data:`GOAL_RADIUS` of the goal (all, and among the
+    starts any policy can reach: within ``MAX_TRAVEL + GOAL_RADIUS``), the mean final reward and the mean progress
+    ``(start distance - final distance) / start distance``. Records without start poses give only the first and the
+    third.
+
+    :param record: a result's ``ood`` entry
+    """
+    final_rewards = np.asarray(record["final_rewards"])
+    final_distances = REWARD_OFFSET - final_rewards
+    measures = dict(reached=float(np.mean(final_distances < GOAL_RADIUS)), final_reward=float(final_rewards.mean()))
+    if "start_poses" in record:
+        start_distances = np.linalg.norm(np.asarray(record["start_poses"])[:, :2] - GOAL, axis=1)
+        reachable = start_distances <= MAX_TRAVEL + GOAL_RADIUS
+        measures["reached_reachable"] = float(np.mean(final_distances[reachable] < GOAL_RADIUS))
+        measures["progress"] = float(np.mean((start_distances - final_distances) / start_distances))
+    return measures
+
+
 def ood_table(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int) -> str:
     """
-    The navigation OOD table: per algorithm, the fraction of episodes ending within 2 m of the goal and the mean final
-    reward (means over seeds, 95% CI).
+    The navigation OOD table: per algorithm, :func:`ood_measures`' means over seeds with their 95% CIs.
 
     :param results: :func:`load_results`
     :param algos: rows
     :param n_demos: demo count
     """
-    lines = ["| algorithm | seeds | ends within 2 m of goal | mean final reward |", "|---|---|---|---|"]
+    columns = ("reached_reachable", "reached", "final_reward", "progress")
+    lines = [
+        f"| algorithm | seeds | ends within {GOAL_RADIUS:g} m of goal, reachable starts | ... all starts | mean final reward "
+        "| mean progress |",
+        "|---|---|---|---|---|---|",
+    ]
     for algo in algos:
         runs = [
             r for r in results if r["env_id"] == NAVIGATION and r["algo"] == algo and r["n_demos"] == n_demos and "ood" in r
         ]
-        if runs:
-            reached = _format(*mean_ci([run["ood"]["reached"] for run in runs]))
-            reward = _format(*mean_ci([run["ood"]["mean_final_reward"] for run in runs]))
-            lines.append(f"| {ALGO_LABELS[algo]} | {len(runs)} | {reached} | {reward} |")
-        else:
-            lines.append(f"| {ALGO_LABELS[algo]} | 0 | not run | not run |")
+        if not runs:
+            lines.append(f"| {ALGO_LABELS[algo]} | 0 |" + " not run |" * len(columns))
+            continue
+        measures = [ood_measures(run["ood"]) for run in runs]
+        cells = [_format(*mean_ci([m[c] for m in measures])) if all(c in m for m in measures) else "–" for c in columns]
+        lines.append(f"| {ALGO_LABELS[algo]} | {len(runs)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -451,15 +505,24 @@ def plot_lap_curves(results: List[Dict[str, Any]], path: Path, scenario_mpail: b
     return save_figure(figure, path)
 
 
-def plot_ood(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int, path: Path) -> Optional[Path]:
+def plot_ood(
+    results: List[Dict[str, Any]],
+    algos: Sequence[str],
+    n_demos: int,
+    path: Path,
+    gaussian: Optional[Tuple[np.ndarray, np.ndarray]] = None,
+) -> Optional[Path]:
     """
     Final positions of the navigation OOD episodes (starts uniform in the 40 x 40 m box), one panel per algorithm,
-    every seed pooled, coloured by the final reward; the goal and its 2 m circle.
+    every seed pooled, coloured by the final reward; the goal and its 2 m circle. With the expert's pose Gaussian
+    and start poses recorded, a last panel draws the final reward against the start's OOD energy (the paper's OOD
+    figure): per algorithm, the mean over the starts of each energy bin.
 
     :param results: :func:`load_results`
     :param algos: panels
     :param n_demos: demo count
     :param path: the PNG to write
+    :param gaussian: :func:`expert_pose_gaussian`, or ``None`` for no energy panel
     :return: the path, or ``None`` when there is nothing to plot
     """
     from sb3_mpail.plotting import import_pyplot, save_figure
@@ -469,8 +532,11 @@ def plot_ood(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int, 
     panels = [(algo, runs) for algo, runs in panels if runs]
     if not panels:
         return None
+    energy_runs = [(algo, runs) for algo, runs in panels if all("start_poses" in r["ood"] for r in runs)]
+    with_energy = gaussian is not None and bool(energy_runs)
     plt = import_pyplot()
-    figure, axes = plt.subplots(1, len(panels), figsize=(4 * len(panels), 4.3), constrained_layout=True, squeeze=False)
+    n_axes = len(panels) + with_energy
+    figure, axes = plt.subplots(1, n_axes, figsize=(4 * n_axes, 4.3), constrained_layout=True, squeeze=False)
     for axis, (algo, runs) in zip(axes[0], panels):
         positions = np.concatenate([np.asarray(r["ood"]["final_positions"]) for r in runs])
         rewards = np.concatenate([np.asarray(r["ood"]["final_rewards"]) for r in runs])
@@ -479,7 +545,23 @@ def plot_ood(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int, 
         axis.add_patch(plt.Circle((10, 10), GOAL_RADIUS, fill=False, color="r"))
         axis.plot(10, 10, "r*", ms=12)
         axis.set(xlim=(-30, 30), ylim=(-30, 30), aspect="equal", title=f"{ALGO_LABELS[algo]}\n{len(runs)} seeds")
-    figure.colorbar(points, ax=axes[0].tolist(), label="final reward")
+    figure.colorbar(points, ax=axes[0][: len(panels)].tolist(), label="final reward")
+    if with_energy:
+        axis = axes[0][-1]
+        energies = {algo: np.concatenate([ood_energy(np.asarray(r["ood"]["start_poses"]), gaussian) for r in runs])
+                    for algo, runs in energy_runs}  # fmt: skip
+        edges = np.quantile(np.concatenate(list(energies.values())), np.linspace(0, 1, 9))
+        for algo, runs in energy_runs:
+            rewards = np.concatenate([np.asarray(r["ood"]["final_rewards"]) for r in runs])
+            bins = np.clip(np.digitize(energies[algo], edges[1:-1]), 0, len(edges) - 2)
+            centres = [energies[algo][bins == b].mean() for b in range(len(edges) - 1) if np.any(bins == b)]
+            means = [rewards[bins == b].mean() for b in range(len(edges) - 1) if np.any(bins == b)]
+            axis.plot(centres, means, "o-", label=ALGO_LABELS[algo].split(" (")[0])
+        axis.set(xlabel="OOD energy log p_E(start pose)  (higher: closer to the demos)", ylabel="mean final reward",
+                 title="final reward against OOD energy")  # fmt: skip
+        axis.axhline(REWARD_OFFSET - GOAL_RADIUS, color="r", ls=":", lw=1)
+        axis.grid(alpha=0.3)
+        axis.legend(fontsize=8)
     return save_figure(figure, path)
 
 
@@ -553,14 +635,19 @@ def write_report(
         write_section(f"baselines-{name}", "\n".join(lines), report_file)
         if env_id == NAVIGATION:
             n_ood = 4 if 4 in grid_demos else grid_demos[0]
-            figure = plot_ood(results, grid_algos, n_ood, figures_dir / f"baselines_{name}_ood.png")
+            gaussian = expert_pose_gaussian(demo_set, n_ood)
+            figure = plot_ood(results, grid_algos, n_ood, figures_dir / f"baselines_{name}_ood.png", gaussian)
             ood = [
                 "## Navigation out of distribution" + ("" if timesteps is None else f" ({timesteps} env steps)"),
                 "",
                 f"Agents trained on {n_ood} demos (starts within 1 m of the origin), run deterministically for 100 steps "
                 "from starts uniform in the 40 x 40 m box centred at the origin with uniform heading (env option "
-                f"`start_region='ood'`, seeds {OOD_SEED}+). Goal reached = the episode ends within {GOAL_RADIUS:.0f} m "
-                "of (10, 10); final reward = sqrt(200) - final distance. Means ± 95% CI over seeds.",
+                f"`start_region='ood'`, seeds {OOD_SEED}+, the same starts for every algorithm). Goal reached = the "
+                f"episode ends within {GOAL_RADIUS:.0f} m of (10, 10); reachable starts: within "
+                f"{MAX_TRAVEL + GOAL_RADIUS:g} m of it (farther, no policy arrives in 100 steps at the 3 m/s top speed); final reward = sqrt(200) - final "
+                "distance; progress = (start distance - final distance) / start distance. Means ± 95% CI (Student's t) "
+                "over seeds. OOD energy: the log-density of the start pose (x, y, cos yaw, sin yaw) under a Gaussian "
+                "fitted to the expert's poses (the paper's appendix).",
                 "",
                 ood_table(results, grid_algos, n_ood),
                 "",
