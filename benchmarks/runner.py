@@ -638,14 +638,15 @@ def write_report(
             gaussian = expert_pose_gaussian(demo_set, n_ood)
             figure = plot_ood(results, grid_algos, n_ood, figures_dir / f"baselines_{name}_ood.png", gaussian)
             ood = [
-                "## Navigation out of distribution" + ("" if timesteps is None else f" ({timesteps} env steps)"),
+                "## Navigation out of distribution" + ("" if demo_set == "navigation" else f", demos {demo_set}_<n>")
+                + ("" if timesteps is None else f" ({timesteps} env steps)"),
                 "",
                 f"Agents trained on {n_ood} demos (starts within 1 m of the origin), run deterministically for 100 steps "
                 "from starts uniform in the 40 x 40 m box centred at the origin with uniform heading (env option "
                 f"`start_region='ood'`, seeds {OOD_SEED}+, the same starts for every algorithm). Goal reached = the "
                 f"episode ends within {GOAL_RADIUS:.0f} m of (10, 10); reachable starts: within "
-                f"{MAX_TRAVEL + GOAL_RADIUS:g} m of it (farther, no policy arrives in 100 steps at the 3 m/s top speed); final reward = sqrt(200) - final "
-                "distance; progress = (start distance - final distance) / start distance. Means ± 95% CI (Student's t) "
+                f"{MAX_TRAVEL + GOAL_RADIUS:g} m of it (farther, no policy arrives in 100 steps at the 3 m/s top speed); "
+                "final reward = sqrt(200) - final distance; progress = (start distance - final distance) / start distance. Means ± 95% CI (Student's t) "
                 "over seeds. OOD energy: the log-density of the start pose (x, y, cos yaw, sin yaw) under a Gaussian "
                 "fitted to the expert's poses (the paper's appendix).",
                 "",
