@@ -647,8 +647,8 @@ def write_report(
                 f"episode ends within {GOAL_RADIUS:.0f} m of (10, 10); reachable starts: within "
                 f"{MAX_TRAVEL + GOAL_RADIUS:g} m of it (farther, no policy arrives in 100 steps at the 3 m/s top speed); "
                 "final reward = sqrt(200) - final distance; progress = (start distance - final distance) / start "
-                "distance. Means ± 95% CI (Student's t) over seeds. OOD energy: the log-density of the start pose (x, y, cos yaw, sin yaw) under a Gaussian "
-                "fitted to the expert's poses (the paper's appendix).",
+                "distance. Means ± 95% CI (Student's t) over seeds. OOD energy: the log-density of the start pose "
+                "(x, y, cos yaw, sin yaw) under a Gaussian fitted to the expert's poses (the paper's appendix).",
                 "",
                 ood_table(results, grid_algos, n_ood),
                 "",
