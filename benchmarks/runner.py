@@ -11,8 +11,9 @@ Each finished run writes ``<results-dir>/<env>/<algo>_<n>demos_seed<s>.json`` (i
 on navigation, its out-of-distribution episodes); a rerun skips the runs whose file exists, so an interrupted grid
 resumes where it stopped. GAIL and IRL-MPC of the same env, demo count and seed come from one GAIL training run (IRL-MPC
 deploys that run's reward and critic). Runs go to ``--workers`` local processes, or to a Ray cluster with
-``--ray-address`` (``pip install ray``). At the end, the tables of every result found go into BENCHMARKS.md
-(normalised score mean and 95% CI, env steps to reach 0.9) and the figures into ``benchmarks/figures/``.
+``--ray-address`` (the ``ray`` extra, ``pip install -e '.[ray]'``), whose results come back to be written here. At the
+end, the tables of every result found go into BENCHMARKS.md (normalised score mean and 95% CI, env steps to reach 0.9)
+and the figures into ``benchmarks/figures/``.
 
 The lap (``sb3_mpail/NavigationLap-v0``, one noisy demo of position and body-frame velocity) has no expert return:
 its runs are measured as ``benchmarks/scenarios.py`` measures MPAIL's, by the cross-track error to the demo's path
@@ -123,7 +124,7 @@ def job_paths(job: Dict[str, Any], options: Dict[str, Any]) -> Dict[str, Path]:
     The result files a job writes, by algorithm.
 
     :param job: an entry of :func:`make_jobs`
-    :param options: :func:`run_job`'s options
+    :param options: :func:`train_job`'s options
     """
     return {
         algo: result_path(options["results_dir"], job["demo_set"], algo, job["n_demos"], job["seed"], options.get("timesteps"))
@@ -152,19 +153,19 @@ def curve_point(predictor: Any, env_id: str, steps: int, n_episodes: int, stats:
     return steps, normalised_score(mean_return, stats), mean_return
 
 
-def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
+def train_job(job: Dict[str, Any], options: Dict[str, Any]) -> Dict[Path, Dict[str, Any]]:
     """
-    Trains one job and writes each of its algorithms' result file; skips it when all exist.
+    Trains one job and measures it; writes nothing, so that it can run on another machine than the one keeping the
+    results (a Ray node).
 
     :param job: an entry of :func:`make_jobs`
     :param options: ``results_dir``, ``config_dir`` (``None``: the default files), ``eval_episodes``,
         ``ood_episodes``, ``eval_every`` (0: a tenth of the budget), ``timesteps`` (``None``: the configs'), ``threads``
-    :return: the result files written
+    :return: each of its algorithms' result, by the file it goes to (:func:`job_paths`)
     """
     env_id, algos, n_demos, seed = job["env_id"], job["algos"], job["n_demos"], job["seed"]
     paths = job_paths(job, options)
-    if all(path.exists() for path in paths.values()):
-        return []
+    results: Dict[Path, Dict[str, Any]] = {}
     th.set_num_threads(options["threads"])
     algo = "irl_mpc" if "irl_mpc" in algos else algos[0]
     hyperparams = load_config(algo, env_id, options["config_dir"])
@@ -204,11 +205,34 @@ def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
                 reached=float(np.mean(REWARD_OFFSET - final_rewards <= GOAL_RADIUS)),
                 mean_final_reward=float(final_rewards.mean()),
             )
+        results[path] = result
+    return results
+
+
+def write_results(results: Dict[Path, Dict[str, Any]]) -> List[str]:
+    """
+    Writes each result to its file, whole or not at all (beside it first, then renamed over it).
+
+    :param results: :func:`train_job`'s
+    :return: the result files written
+    """
+    for path, result in results.items():
         path.parent.mkdir(parents=True, exist_ok=True)
         partial = path.with_name(path.name + ".partial")
         partial.write_text(json.dumps(result, default=str))
         partial.replace(path)
-    return [str(path) for path in paths.values()]
+    return [str(path) for path in results]
+
+
+def run_job(job: Dict[str, Any], options: Dict[str, Any]) -> List[str]:
+    """
+    Trains one job and writes each of its algorithms' result file.
+
+    :param job: an entry of :func:`make_jobs`
+    :param options: :func:`train_job`'s
+    :return: the result files written
+    """
+    return write_results(train_job(job, options))
 
 
 def run_grid(jobs: List[Dict[str, Any]], options: Dict[str, Any], workers: int = 1, ray_address: Optional[str] = None) -> None:
@@ -216,21 +240,16 @@ def run_grid(jobs: List[Dict[str, Any]], options: Dict[str, Any], workers: int =
     Runs the jobs one after another, in ``workers`` local processes, or as Ray tasks on the cluster at ``ray_address``.
 
     :param jobs: :func:`make_jobs`'s entries
-    :param options: :func:`run_job`'s options
+    :param options: :func:`train_job`'s options
     :param workers: local processes
     :param ray_address: a Ray cluster's address (``auto`` for the local one)
     """
     jobs = [job for job in jobs if not all(path.exists() for path in job_paths(job, options).values())]
     print(f"{len(jobs)} runs to do", flush=True)
+    if not jobs:
+        return
     if ray_address is not None:
-        try:
-            import ray
-        except ImportError as error:
-            raise SystemExit("--ray-address needs Ray, which is not installed: pip install 'ray[default]'.") from error
-        ray.init(address=ray_address)
-        remote = ray.remote(num_cpus=options["threads"])(run_job)
-        for paths in ray.get([remote.remote(job, options) for job in jobs]):
-            print("wrote", *paths, flush=True)
+        run_on_ray(jobs, options, ray_address)
     elif workers > 1:
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
             for paths in pool.map(run_job, jobs, [options] * len(jobs)):
@@ -238,6 +257,34 @@ def run_grid(jobs: List[Dict[str, Any]], options: Dict[str, Any], workers: int =
     else:
         for job in jobs:
             print("wrote", *run_job(job, options), flush=True)
+
+
+def run_on_ray(jobs: List[Dict[str, Any]], options: Dict[str, Any], address: str) -> None:
+    """
+    Runs the jobs as Ray tasks of ``options["threads"]`` CPUs each on the cluster at ``address``, and writes each
+    result here as its task finishes: the nodes need sb3-mpail installed, and get this ``benchmarks`` package (with its
+    configs and BC's action demos) from the driver; a ``config_dir`` must be readable at the same path on every node.
+
+    :param jobs: :func:`make_jobs`'s entries
+    :param options: :func:`train_job`'s options
+    :param address: the cluster's address (``auto`` for the one running on this machine)
+    """
+    try:
+        import ray
+    except ImportError as error:
+        raise SystemExit("--ray-address needs Ray, which is not installed: pip install -e '.[ray]'.") from error
+    if options["config_dir"] is not None:  # tasks run in folders of Ray's own
+        options = dict(options, config_dir=Path(options["config_dir"]).resolve())
+    # the tasks are this module's functions, which Ray's workers import by name: the package travels with them
+    ray.init(address=address, runtime_env=dict(py_modules=[str(Path(__file__).resolve().parent)]))
+    try:
+        remote = ray.remote(num_cpus=options["threads"])(train_job)
+        pending = [remote.remote(job, options) for job in jobs]
+        while pending:
+            finished, pending = ray.wait(pending)
+            print("wrote", *write_results(ray.get(finished[0])), flush=True)
+    finally:
+        ray.shutdown()
 
 
 # --------------------------------------------------------------------------------------------------------------------

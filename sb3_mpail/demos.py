@@ -3,10 +3,14 @@ Observation-only expert demonstrations: load them from any of the formats users 
 demo sets shipped with the package.
 
 Accepted: a sequence of imitation ``Trajectory`` objects, imitation ``Transitions``, an ``.npz`` file, a directory
-written by ``imitation.data.serialize.save``, or the name of a shipped demo set (``"pendulum_4"``, see
-:func:`list_shipped_demos`). Only observations are read; expert actions are never needed. An ``.npz`` file holds
-``obs`` of shape ``(n_demos, T + 1, obs_dim)`` (equal-length episodes), or ``obs`` of shape
-``(sum of T_i + 1, obs_dim)`` with ``episode_lengths`` giving each episode's ``T_i + 1`` observations.
+written by ``imitation.data.serialize.save``, the name of a shipped demo set (``"pendulum_4"``, see
+:func:`list_shipped_demos`), or a Minari dataset (Farama's offline-data format; the ``minari`` extra): a
+``minari.MinariDataset``, or the id of a dataset in the local Minari root (``"navigation/expert-v0"``,
+``[namespace/]name-v<version>``; the root is ``$MINARI_DATASETS_PATH``, by default ``~/.minari/datasets``). A string
+is read as a path if that path exists, else as a shipped demo set's name, else, if it has an id's form, as a Minari
+id. Only observations are read; expert actions are never needed. An ``.npz`` file holds ``obs`` of shape
+``(n_demos, T + 1, obs_dim)`` (equal-length episodes), or ``obs`` of shape ``(sum of T_i + 1, obs_dim)`` with
+``episode_lengths`` giving each episode's ``T_i + 1`` observations.
 
 The shipped demo sets are package data: ``<name>_<n>.npz`` holds ``n`` expert episodes and ``<name>.json`` the
 expert's and a random policy's returns (the normalised score's 1 and 0, see
@@ -17,21 +21,27 @@ package's ``data`` folder ships a new set.
 import json
 import os
 import re
+import sys
 import zipfile
 import zlib
 from pathlib import Path
-from typing import Any, Dict, List, NamedTuple, Sequence, Tuple, Union
+from typing import TYPE_CHECKING, Any, Dict, List, NamedTuple, Sequence, Tuple, Union
 
 import numpy as np
 from gymnasium import spaces
 from imitation.data.types import Trajectory, Transitions
 
-DemoSource = Union[str, os.PathLike, Sequence[Trajectory], Transitions]
+if TYPE_CHECKING:
+    from minari import MinariDataset
+
+DemoSource = Union[str, os.PathLike, Sequence[Trajectory], Transitions, "MinariDataset"]
 
 #: the shipped demo sets and their information files (package data)
 SHIPPED_DEMO_DIR = Path(__file__).resolve().parent / "data"
 #: a shipped demo set's name: the demos' family (its information file's name) and the number of episodes
 _DEMO_SET_NAME = re.compile(r"^(?P<family>.+)_(?P<n_demos>\d+)$")
+#: a Minari dataset id as Minari writes them: namespaces, a name and its version, e.g. ``"navigation/expert-v0"``
+_MINARI_ID = re.compile(r"^(?:[-\w]+/)*[-\w]+-v\d+$")
 
 
 class ExpertTransitions(NamedTuple):
@@ -166,24 +176,84 @@ def shipped_demo_info(name: str) -> Dict[str, Any]:
     return json.loads(path.read_text())
 
 
+def _is_minari_dataset(demos: Any) -> bool:
+    minari = sys.modules.get("minari")  # a MinariDataset exists only once minari is imported
+    return minari is not None and isinstance(demos, minari.MinariDataset)
+
+
+def _minari_episodes(dataset: "MinariDataset") -> List[np.ndarray]:
+    """
+    The observations of a Minari dataset's episodes, refusing observation spaces that are not a flat ``Box``.
+
+    :param dataset: a ``minari.MinariDataset``
+    :raises ValueError: its observations are not a ``Box`` (a ``Dict`` or ``Tuple`` space), or it has no usable episodes
+    """
+    source = f"Minari dataset {dataset.spec.dataset_id}"
+    if not isinstance(dataset.observation_space, spaces.Box):
+        raise ValueError(
+            f"{source} has a {type(dataset.observation_space).__name__} observation space, but demos must be flat "
+            "Box observations: record the dataset from the env wrapped in gymnasium's FlattenObservation, and train on "
+            "the env wrapped the same way."
+        )
+    return _checked_episodes([episode.observations for episode in dataset.iterate_episodes()], source)
+
+
+def _local_minari_dataset(dataset_id: str) -> "MinariDataset":
+    """
+    The dataset of that id in the local Minari root.
+
+    :param dataset_id: ``[namespace/]name-v<version>``
+    :raises ImportError: minari is not installed (the message names the extra)
+    :raises FileNotFoundError: the local root has no such dataset (the message names the root and the datasets in it)
+    """
+    try:
+        import minari
+    except ImportError as error:
+        raise ImportError(
+            f"Demo source {dataset_id!r} is not an existing path or a shipped demo set, and reading it as a Minari dataset "
+            "id needs minari, which is not installed: pip install 'sb3-mpail[minari]'."
+        ) from error
+    try:
+        return minari.load_dataset(dataset_id)
+    except FileNotFoundError:
+        from minari.storage import get_dataset_path
+
+        local = ", ".join(minari.list_local_datasets()) or "none"
+        raise FileNotFoundError(
+            f"Demo source {dataset_id!r} is not an existing path or a shipped demo set, nor a dataset in the local Minari "
+            f"root {get_dataset_path()} (set by MINARI_DATASETS_PATH), which holds: {local}. A remote dataset is "
+            "downloaded with `minari download <id>`."
+        ) from None
+
+
 def load_demo_episodes(demos: DemoSource) -> List[np.ndarray]:
     """
     The demos' episodes as observation arrays, ``(T_i + 1, obs_dim)`` each.
 
-    :param demos: trajectories, an ``.npz`` path, an imitation ``serialize`` directory or the name of a shipped demo
-        set (not ``Transitions``, which hold no episode boundaries); an existing path wins over a shipped name
-    :raises FileNotFoundError: the path does not exist and no shipped demo set has that name
-    :raises ValueError: the file cannot be read, or there are no episodes, or an episode has fewer than two observations
+    :param demos: trajectories, an ``.npz`` path, an imitation ``serialize`` directory, the name of a shipped demo
+        set, a ``minari.MinariDataset`` or a local Minari dataset's id (not ``Transitions``, which hold no episode
+        boundaries); a string is a path if it exists, else a shipped name, else, of the form
+        ``[namespace/]name-v<version>``, a Minari id
+    :raises FileNotFoundError: the path does not exist, no shipped demo set has that name and no local Minari dataset
+        that id
+    :raises ImportError: a Minari id is given and minari is not installed
+    :raises ValueError: the file cannot be read, or there are no episodes, or an episode has fewer than two
+        observations, or a Minari dataset's observations are not a ``Box``
     """
+    if _is_minari_dataset(demos):
+        return _minari_episodes(demos)
     if isinstance(demos, (str, os.PathLike)):
         path = Path(demos)
         if not path.exists():
-            if str(demos) not in list_shipped_demos():
+            if str(demos) in list_shipped_demos():
+                path = SHIPPED_DEMO_DIR / f"{demos}.npz"
+            elif isinstance(demos, str) and _MINARI_ID.match(demos):
+                return _minari_episodes(_local_minari_dataset(demos))
+            else:
                 raise FileNotFoundError(
                     f"Demo path {path} does not exist, and it is not the name of a shipped demo set "
-                    f"({', '.join(list_shipped_demos())})."
+                    f"({', '.join(list_shipped_demos())}) or a Minari dataset id ([namespace/]name-v<version>)."
                 )
-            path = SHIPPED_DEMO_DIR / f"{demos}.npz"
         if path.is_dir():
             from imitation.data import serialize
 
@@ -192,8 +262,8 @@ def load_demo_episodes(demos: DemoSource) -> List[np.ndarray]:
     if isinstance(demos, Sequence) and all(isinstance(item, Trajectory) for item in demos):
         return _checked_episodes([trajectory.obs for trajectory in demos], "The sequence of demo trajectories")
     raise TypeError(
-        "demos must be a sequence of imitation Trajectory objects, imitation Transitions, an .npz file or a "
-        f"directory saved by imitation.data.serialize; got {type(demos).__name__}."
+        "demos must be a sequence of imitation Trajectory objects, imitation Transitions, an .npz file, a "
+        f"directory saved by imitation.data.serialize or a Minari dataset; got {type(demos).__name__}."
     )
 
 
@@ -203,12 +273,15 @@ def load_demos(
     """
     Reads expert observations and checks them against the environment's observation space.
 
-    :param demos: trajectories, transitions, an ``.npz`` path, an imitation ``serialize`` directory or the name of a
-        shipped demo set (:func:`list_shipped_demos`)
+    :param demos: trajectories, transitions, an ``.npz`` path, an imitation ``serialize`` directory, the name of a
+        shipped demo set (:func:`list_shipped_demos`), a ``minari.MinariDataset`` or a local Minari dataset's id
+        (:func:`load_demo_episodes` tells them apart)
     :param observation_space: the environment's observation space (or the space the demos must have)
     :param space_name: how error messages name that space
     :return: the expert's ``(s, s')`` pairs
-    :raises FileNotFoundError: the path does not exist and no shipped demo set has that name
+    :raises FileNotFoundError: the path does not exist, no shipped demo set has that name and no local Minari dataset
+        that id
+    :raises ImportError: a Minari id is given and minari is not installed
     :raises ValueError: shapes differ from the observation space, values are not finite, or the data is empty
     """
     if isinstance(demos, Transitions):

@@ -14,7 +14,7 @@ tomllib = pytest.importorskip("tomllib")  # Python 3.11+
 ROOT = Path(__file__).resolve().parent.parent
 FOLDERS = ("sb3_mpail", "benchmarks", "tests", "demos")
 #: distributions of the optional imports that the test install leaves out
-NOT_INSTALLED = {"ray": "ray", "pytorch_mppi": "pytorch-mppi"}
+NOT_INSTALLED = {"pytorch_mppi": "pytorch-mppi"}
 #: imported where present, never needed: gymnasium's own dependency, read only to drop a notice (sb3_mpail/_quiet.py)
 UNDECLARED_ON_PURPOSE = {"farama_notifications"}
 
