@@ -67,6 +67,8 @@ class MPPIPolicy(BasePolicy):
         and the value still use the full state. ``None``: the full observation. Its parameters, if any, are saved
         but not trained. Functions are saved with cloudpickle (module-level functions by reference, so their
         module must be importable when loading; lambdas and closures by value)
+    :param value_features: what the value sees of a state, the same kinds of map as ``discriminator_features``
+        (e.g. :class:`~sb3_mpail.mppi.costs.AngleFeatures` for headings as cosine and sine); ``None``: the full state
     :param sampler: how action sequences are sampled around the plan: ``"gaussian"`` (the paper's, std
         ``noise_std``), ``"delta"`` (the authors' code: smooth random walks,
         :class:`~sb3_mpail.mppi.sampling.DeltaSampler`, ``noise_std`` its increments' std) or a module
@@ -96,6 +98,7 @@ class MPPIPolicy(BasePolicy):
         value_hidden_sizes: Sequence[int] = (32, 32),
         use_spectral_norm: bool = True,
         discriminator_features: FeatureSpec | None = None,
+        value_features: FeatureSpec | None = None,
         sampler: Union[str, nn.Module] = "gaussian",
         sampler_kwargs: Dict[str, Any] | None = None,
         step_cost: nn.Module | None = None,
@@ -126,6 +129,7 @@ class MPPIPolicy(BasePolicy):
             value_hidden_sizes=value_hidden_sizes,
             use_spectral_norm=use_spectral_norm,
             discriminator_features=discriminator_features,
+            value_features=value_features,
             sampler=sampler,
             sampler_kwargs=sampler_kwargs,
             step_cost=step_cost,
@@ -141,6 +145,10 @@ class MPPIPolicy(BasePolicy):
             self.feature_space, action_space, discriminator_hidden_sizes, use_spectral_norm
         )
         self.value_net = make_value_network(observation_space.shape[0], value_hidden_sizes)
+        if value_features is not None:
+            mapped = FeatureMap.wrap(value_features).requires_grad_(False)  # a fixed map: the value optimiser leaves it
+            value_inputs = FeatureMap.space(mapped, observation_space).shape[0]
+            self.value_net = nn.Sequential(mapped, make_value_network(value_inputs, value_hidden_sizes))
         self.dynamics = make_dynamics(dynamics, observation_space, action_space, dynamics_kwargs)
         low, high = action_space.low.astype(np.float32), action_space.high.astype(np.float32)
         self.planner = MPPIPlanner(

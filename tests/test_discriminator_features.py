@@ -1,4 +1,4 @@
-"""The discriminator can see chosen features of the state while the planner, dynamics and value use the full state."""
+"""The discriminator and the value can each see chosen features of the state while the planner and dynamics use all of it."""
 
 import gymnasium as gym
 import numpy as np
@@ -9,6 +9,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from torch import nn
 
 from sb3_mpail import MPAIL
+from sb3_mpail.mppi import AngleFeatures
 
 TINY_PLANNER = dict(n_samples=16, horizon=3, n_iterations=2)
 
@@ -137,3 +138,31 @@ def test_feature_map_of_the_wrong_shape_is_refused(demo_observations):
         make_model(trajectories(demo_observations), features=lambda states: states[:, 0])
     with pytest.raises(TypeError, match="discriminator_features must be an nn.Module, a callable or a list of state"):
         make_model(trajectories(demo_observations), features="angle")
+
+
+def test_angle_features_put_each_angle_as_its_cosine_and_sine_in_its_place():
+    states = th.tensor([[0.5, np.pi - 0.01, 2.0, -np.pi + 0.01, 7.0]])
+    features = AngleFeatures([3, 1])(states)
+    expected = [0.5, np.cos(np.pi - 0.01), np.sin(np.pi - 0.01), 2.0, np.cos(-np.pi + 0.01), np.sin(-np.pi + 0.01), 7.0]
+    assert th.allclose(features, th.tensor([expected], dtype=th.float32))
+    # headings on either side of the wrap are neighbours
+    assert th.allclose(features[0, 1:3], features[0, 4:6] * th.tensor([1.0, -1.0]), atol=1e-6)
+    with pytest.raises(ValueError, match="distinct angle indices"):
+        AngleFeatures([1, 1])
+
+
+def test_the_value_plans_and_learns_on_its_own_features_and_is_saved_with_them(demo_observations, tmp_path):
+    model = MPAIL(
+        "MlpMPPI", make_vec_env("Pendulum-v1", n_envs=2, seed=0), trajectories(demo_observations), n_steps=16, seed=0,
+        policy_kwargs=dict(TINY_PLANNER, value_features=pendulum_angle),
+    )  # fmt: skip
+    assert model.policy.value_net[1][0].in_features == 2  # the value sees [cos, sin] only
+    model.learn(32)
+    states = th.tensor([[1.0, 0.0, 5.0], [1.0, 0.0, -5.0]])
+    with th.no_grad():
+        values = model.policy.planner.terminal_value(states)
+    assert values[0] == values[1], "the angular velocity is not among the value's features"
+    model.save(tmp_path / "model")
+    loaded = MPAIL.load(tmp_path / "model")
+    with th.no_grad():
+        assert th.equal(loaded.policy.planner.terminal_value(states), values)

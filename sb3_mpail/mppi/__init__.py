@@ -1,6 +1,12 @@
 """Batched infinite-horizon MPPI: sampling, dynamics, costs and the planner that combines them."""
 
-from sb3_mpail.mppi.costs import TerminalValue, TransitionCost, make_transition_discriminator, make_value_network
+from sb3_mpail.mppi.costs import (
+    AngleFeatures,
+    TerminalValue,
+    TransitionCost,
+    make_transition_discriminator,
+    make_value_network,
+)
 from sb3_mpail.mppi.dynamics import (
     DEFAULT_DYNAMICS,
     DYNAMICS_MODELS,
@@ -18,6 +24,7 @@ from sb3_mpail.mppi.planner import MPPIPlanner, PlanResult
 from sb3_mpail.mppi.sampling import DeltaSampler, GaussianSampler
 
 __all__ = [
+    "AngleFeatures",
     "DEFAULT_DYNAMICS",
     "DYNAMICS_MODELS",
     "CallableDynamics",

@@ -73,6 +73,30 @@ class FeatureSelection(nn.Module):
         return states[:, self.indices]
 
 
+class AngleFeatures(nn.Module):
+    """
+    The state with each angle replaced by its cosine and sine (placed where the angle was), so a network sees headings
+    as the continuous, bounded points they are rather than as wrapped numbers: ``-pi + 0.01`` and ``pi - 0.01`` are
+    neighbours, and no heading lies beyond the data's range for a network to extrapolate to.
+
+    :param angle_indices: the state dimensions that are angles (e.g. ``[5]``, the navigation car's yaw)
+    """
+
+    def __init__(self, angle_indices: Sequence[int]):
+        super().__init__()
+        if len(angle_indices) == 0 or len(set(angle_indices)) != len(angle_indices):
+            raise ValueError(f"AngleFeatures needs distinct angle indices; got {list(angle_indices)}.")
+        self.angle_indices = [int(index) for index in angle_indices]
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        columns, previous = [], 0
+        for index in sorted(self.angle_indices):
+            angle = states[:, index : index + 1]
+            columns += [states[:, previous:index], th.cos(angle), th.sin(angle)]
+            previous = index + 1
+        return th.cat([*columns, states[:, previous:]], dim=1)
+
+
 class FeatureMap(nn.Module):
     """
     A fixed map from ``(batch, state_dim)`` states to ``(batch, n_features)`` discriminator features.
