@@ -19,6 +19,7 @@ from sb3_mpail.checks import (
 from sb3_mpail.mppi.costs import (
     FeatureMap,
     FeatureSpec,
+    MappedNetwork,
     TerminalValue,
     TransitionCost,
     make_transition_discriminator,
@@ -148,7 +149,7 @@ class MPPIPolicy(BasePolicy):
         if value_features is not None:
             mapped = FeatureMap.wrap(value_features).requires_grad_(False)  # a fixed map: the value optimiser leaves it
             value_inputs = FeatureMap.space(mapped, observation_space).shape[0]
-            self.value_net = nn.Sequential(mapped, make_value_network(value_inputs, value_hidden_sizes))
+            self.value_net = MappedNetwork(mapped, make_value_network(value_inputs, value_hidden_sizes))
         self.dynamics = make_dynamics(dynamics, observation_space, action_space, dynamics_kwargs)
         low, high = action_space.low.astype(np.float32), action_space.high.astype(np.float32)
         self.planner = MPPIPlanner(

@@ -10,6 +10,7 @@ from torch import nn
 
 from sb3_mpail import MPAIL
 from sb3_mpail.mppi import AngleFeatures
+from sb3_mpail.mppi.fused import Workspace
 
 TINY_PLANNER = dict(n_samples=16, horizon=3, n_iterations=2)
 
@@ -80,17 +81,20 @@ def test_rewards_and_planner_costs_see_only_the_features(demo_observations):
         logits = model.policy.discriminator(observations[:, :2], None, next_observations[:, :2], None)
     kept = buffer.flat("timeouts") == 0  # time-limit steps also hold the bootstrapped value
     np.testing.assert_allclose(buffer.flat("rewards")[kept], logits.numpy()[kept])
-    # states differing only in the unseen velocity cost the same; the fused path, which sees whole states, is off
+    # states differing only in the unseen velocity cost the same, on the module path and on the fused one
     cost = model.policy.planner.step_cost
     model.policy.set_training_mode(False)
     with th.no_grad():
-        assert cost.planning_view(3) is None
         states = th.tensor([[1.0, 0.0, 0.0], [1.0, 0.0, 5.0]])
         next_states = th.tensor([[0.9, 0.1, 1.0], [0.9, 0.1, -4.0]])
         costs = cost(states, next_states)
         expected = -model.policy.discriminator(states[:, :2], None, next_states[:, :2], None)
+        fused = cost.planning_view(3)
+        roll_out = th.stack((states, next_states)).view(2, 1, 2, 3)  # (horizon + 1, envs, samples, state)
+        fused_costs = fused(roll_out, th.ones(1), Workspace())
     assert th.allclose(costs, expected)
     assert costs[0].item() == pytest.approx(costs[1].item())
+    assert th.allclose(fused_costs.view(2), costs, atol=1e-6)
 
 
 def test_a_list_of_indices_selects_state_dimensions(demo_observations):
@@ -156,7 +160,7 @@ def test_the_value_plans_and_learns_on_its_own_features_and_is_saved_with_them(d
         "MlpMPPI", make_vec_env("Pendulum-v1", n_envs=2, seed=0), trajectories(demo_observations), n_steps=16, seed=0,
         policy_kwargs=dict(TINY_PLANNER, value_features=pendulum_angle),
     )  # fmt: skip
-    assert model.policy.value_net[1][0].in_features == 2  # the value sees [cos, sin] only
+    assert model.policy.value_net.network[0].in_features == 2  # the value sees [cos, sin] only
     model.learn(32)
     states = th.tensor([[1.0, 0.0, 5.0], [1.0, 0.0, -5.0]])
     with th.no_grad():

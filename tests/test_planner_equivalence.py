@@ -10,7 +10,8 @@ import torch as th
 
 import sb3_mpail.mppi.fused as fused
 from sb3_mpail.envs.navigation import NavigationEnv
-from sb3_mpail.mppi import KinematicBicycle, PendulumDynamics
+from sb3_mpail.mppi import AngleFeatures, KinematicBicycle, PendulumDynamics
+from sb3_mpail.mppi.costs import MappedView
 from sb3_mpail.mppi.planner import rollout
 from sb3_mpail.mppi.reference import rollout as rollout_step_by_step
 from sb3_mpail.policies import MPPIPolicy
@@ -29,9 +30,9 @@ def make_policy(env: gym.Env, dynamics: str, seed: int = 0, dtype: th.dtype = th
     policy = MPPIPolicy(env.observation_space, env.action_space, dynamics=dynamics, **kwargs).to(dtype)
     # a few training-mode calls move spectral norm's power-iteration vectors away from their initial values
     with th.no_grad():
-        states = th.randn(64, 2 * env.observation_space.shape[0], dtype=dtype)
+        states, next_states = th.randn(2, 64, env.observation_space.shape[0], dtype=dtype)
         for _ in range(3):
-            policy.discriminator(states[:, : states.shape[1] // 2], None, states[:, states.shape[1] // 2 :], None)
+            policy.discriminator(policy.features(states), None, policy.features(next_states), None)
     policy.set_training_mode(False)
     policy.temperature.fill_(0.05)  # peaked weights make the plan sensitive to every cost
     return policy
@@ -105,6 +106,21 @@ def test_float32_plans_at_the_paper_settings_match_the_reference(monkeypatch, cp
 def test_pendulum_plans_match_the_reference():
     policy = make_policy(PENDULUM, "pendulum", n_samples=256, horizon=15)
     assert_same_plans(*plan_both_ways(policy, pendulum_states(4)))
+
+
+@pytest.mark.parametrize("cpu_path", ["kernel", "blas"])
+def test_feature_maps_go_through_the_fused_views_and_match_the_reference(monkeypatch, cpu_path):
+    use_cpu_path(monkeypatch, cpu_path)
+    headings = AngleFeatures([5])
+    policy = make_policy(NAVIGATION, "bicycle", n_samples=128, discriminator_features=headings, value_features=headings)
+    with th.no_grad():
+        assert isinstance(policy.planner.step_cost.planning_view(12), MappedView)
+        assert isinstance(policy.planner.terminal_value.planning_view(12), MappedView)
+    assert_same_plans(*plan_both_ways(policy, navigation_states(3)))
+    float32 = make_policy(NAVIGATION, "bicycle", dtype=th.float32, n_samples=128, discriminator_features=headings,
+                          value_features=headings)  # fmt: skip
+    float32.temperature.fill_(1.0)
+    assert_same_plans(*plan_both_ways(float32, navigation_states(4, dtype=th.float32)), atol=1e-5)
 
 
 def test_delta_sampling_plans_match_the_reference():

@@ -145,6 +145,48 @@ class FeatureMap(nn.Module):
         return spaces.Box(-np.inf, np.inf, (probe.shape[1],), np.float32)
 
 
+class MappedNetwork(nn.Module):
+    """
+    ``network(features(x))``: a network behind a fixed feature map (the value's ``value_features``), kept apart so the
+    planner's fast path can map a whole roll-out once and run the bare network on it.
+
+    :param features: the fixed map, ``(batch, state_dim)`` to ``(batch, n_features)``
+    :param network: the network on the features
+    """
+
+    def __init__(self, features: nn.Module, network: nn.Module):
+        super().__init__()
+        self.features = features
+        self.network = network
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        return self.network(self.features(states))
+
+
+class MappedView:
+    """
+    A planning view of a network behind a feature map: the map applied once to every state of the roll-out (a batched
+    call over all rows), then the network's own fused view on the mapped states. Held state dimensions do not carry
+    over to the features, so none are held.
+
+    :param view: the fused view built for ``n_features`` inputs per state
+    :param features: the feature map
+    """
+
+    def __init__(self, view, features: nn.Module):
+        self.view = view
+        self.features = features
+
+    def _mapped(self, states: th.Tensor) -> th.Tensor:
+        return self.features(states.reshape(-1, states.shape[-1])).view(*states.shape[:-1], -1)
+
+    def hold(self, held_dims: Sequence[int], initial_states: th.Tensor) -> None:
+        self.view.hold((), self._mapped(initial_states))
+
+    def __call__(self, states: th.Tensor, *arguments):
+        return self.view(self._mapped(states), *arguments)
+
+
 class TransitionCost(nn.Module):
     """
     Step cost ``c(s, s') = -d_theta(phi(s), phi(s'))`` over any leading batch shape.
@@ -166,32 +208,36 @@ class TransitionCost(nn.Module):
             states, next_states = self.features(states), self.features(next_states)
         return -self.discriminator(states, None, next_states, None).view(batch_shape)
 
-    def planning_view(self, state_dim: int) -> Optional[FusedTransitionCost]:
+    def planning_view(self, state_dim: int) -> Optional[Union[FusedTransitionCost, MappedView]]:
         """
-        The fused whole-horizon cost with the discriminator's weights frozen (until they change), or ``None``
-        where the module path must be used: gradients enabled, training mode (spectral norm's power iteration
-        then updates its vectors on every call), a feature map, or a discriminator other than an MLP on ``(s, s')``.
+        The fused whole-horizon cost with the discriminator's weights frozen (until they change), behind the feature
+        map if there is one, or ``None`` where the module path must be used: gradients enabled, training mode
+        (spectral norm's power iteration then updates its vectors on every call), or a discriminator other than an MLP
+        on ``(s, s')``.
 
         :param state_dim: size of a state
         """
         net = self.discriminator
-        if th.is_grad_enabled() or net.training or self.features is not None or not isinstance(net, BasicRewardNet):
+        if th.is_grad_enabled() or net.training or not isinstance(net, BasicRewardNet):
             return None
         if not (net.use_state and net.use_next_state) or net.use_action or net.use_done:
             return None
 
         def build() -> Optional[FusedTransitionCost]:
             mlp = freeze_mlp(net.mlp)
-            return FusedTransitionCost(mlp, state_dim) if fused_mlp_ok(mlp, 2 * state_dim) else None
+            inputs = state_dim if self.features is None else (mlp.weights[0].shape[0] // 2 if mlp is not None else 0)
+            return FusedTransitionCost(mlp, inputs) if fused_mlp_ok(mlp, 2 * inputs) else None
 
-        return self._planning_views.get(net.mlp, state_dim, build)
+        view = self._planning_views.get(net.mlp, state_dim, build)
+        return view if view is None or self.features is None else MappedView(view, self.features)
 
 
 class TerminalValue(nn.Module):
     """
     Terminal value ``V_phi(s)`` over any leading batch shape.
 
-    :param value_network: network mapping ``(batch, state_dim)`` to ``(batch, 1)``
+    :param value_network: network mapping ``(batch, state_dim)`` to ``(batch, 1)``, a plain MLP or a
+        :class:`MappedNetwork`
     """
 
     def __init__(self, value_network: nn.Module):
@@ -202,18 +248,23 @@ class TerminalValue(nn.Module):
     def forward(self, states: th.Tensor) -> th.Tensor:
         return self.value_network(states.reshape(-1, states.shape[-1])).view(states.shape[:-1])
 
-    def planning_view(self, state_dim: int) -> Optional[FusedValue]:
+    def planning_view(self, state_dim: int) -> Optional[Union[FusedValue, MappedView]]:
         """
-        The value with its weights frozen (until they change), or ``None`` where the module path must be used
-        (gradients enabled, training mode or a network other than a plain MLP).
+        The value with its weights frozen (until they change), behind its feature map if it is a
+        :class:`MappedNetwork`, or ``None`` where the module path must be used (gradients enabled, training mode or a
+        network other than a plain MLP).
 
         :param state_dim: size of a state
         """
         if th.is_grad_enabled() or self.value_network.training:
             return None
+        mapped = isinstance(self.value_network, MappedNetwork)
+        network = self.value_network.network if mapped else self.value_network
 
         def build() -> Optional[FusedValue]:
-            mlp = freeze_mlp(self.value_network)
-            return FusedValue(mlp) if fused_mlp_ok(mlp, state_dim) else None
+            mlp = freeze_mlp(network)
+            inputs = (mlp.weights[0].shape[0] if mlp is not None else 0) if mapped else state_dim
+            return FusedValue(mlp) if fused_mlp_ok(mlp, inputs) else None
 
-        return self._planning_views.get(self.value_network, state_dim, build)
+        view = self._planning_views.get(network, state_dim, build)
+        return view if view is None or not mapped else MappedView(view, self.value_network.features)
