@@ -69,7 +69,7 @@ def steps_to_reach(curve: List[Dict[str, float]], target: float = TARGET) -> int
     return None
 
 
-def reevaluate(model_path: Path, n_episodes: int, seed: int) -> Tuple[float, float]:
+def reevaluate(model_path: Path, n_episodes: int, seed: int, demos: str) -> Tuple[float, float]:
     """
     The saved final model's deterministic mean return over ``n_episodes`` fresh episodes, with the planner's noise
     seeded too, so the figure does not hang on the few episodes of the learning curve.
@@ -77,17 +77,17 @@ def reevaluate(model_path: Path, n_episodes: int, seed: int) -> Tuple[float, flo
     :param model_path: a ``model.zip`` written by the main command
     :param n_episodes: evaluation episodes
     :param seed: seed of the starts and of the planner's sampling noise
+    :param demos: the demos trained on (their expert is the score's 1)
     :return: mean return and its normalised score
     """
     from sb3_mpail import MPAIL
-    from sb3_mpail.demos import shipped_demo_info
     from sb3_mpail.evaluation import normalised_score
-    from sb3_mpail.train_navigation import REFERENCE, evaluate
+    from sb3_mpail.train_navigation import evaluate, reference_of
 
     model = MPAIL.load(model_path, device="cpu")
     model.set_random_seed(seed)
     mean_return, _ = evaluate(model, n_episodes, seed)
-    return mean_return, normalised_score(mean_return, shipped_demo_info(REFERENCE))
+    return mean_return, normalised_score(mean_return, reference_of(demos))
 
 
 def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
@@ -97,10 +97,9 @@ def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
     :param args: this benchmark's command line
     :param wall_seconds: the whole benchmark's wall-clock (``None``: not measured, e.g. ``--report-only``)
     """
-    from sb3_mpail.demos import shipped_demo_info
     from sb3_mpail.evaluation import reference_returns
     from sb3_mpail.plotting import plot_learning_curves
-    from sb3_mpail.train_navigation import REFERENCE
+    from sb3_mpail.train_navigation import reference_family, reference_of
 
     results = []
     for seed in args.seeds:
@@ -109,7 +108,8 @@ def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
             raise SystemExit(f"{path} is missing: run the benchmark for seed {seed} first.")
         results.append(json.loads(path.read_text()))
     final = [
-        reevaluate(Path(args.out_dir) / f"seed{seed}" / "model.zip", args.final_eval_episodes, REEVALUATION_SEED + seed)
+        reevaluate(Path(args.out_dir) / f"seed{seed}" / "model.zip", args.final_eval_episodes, REEVALUATION_SEED + seed,
+                   args.demos)  # fmt: skip
         for seed in args.seeds
     ]
     returns, scores = np.array([r for r, _ in final]), np.array([s for _, s in final])
@@ -131,7 +131,7 @@ def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
     if example.exists():
         shutil.copyfile(example, example_figure)
     first = results[0]
-    random_return, expert_return = reference_returns(shipped_demo_info(REFERENCE))
+    random_return, expert_return = reference_returns(reference_of(args.demos))
     command = "python -m benchmarks.navigation " + " ".join(option for option in sys.argv[1:] if option != "--report-only")
     lines = [
         "## Navigation (`sb3_mpail/Navigation-v0`): learning with the default CPU settings",
@@ -145,7 +145,7 @@ def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
         "the paper's. Score = (R - random) / (expert - random) with R the deterministic planner's mean return "
         f"({first['n_eval_episodes']} episodes per learning-curve point); expert {expert_return:.1f}, random "
         f"{random_return:.1f} "
-        "(`sb3_mpail/data/navigation.json`).",
+        f"(`sb3_mpail/data/{reference_family(args.demos)}.json`).",
         "",
         f"**Final normalised score: {scores.mean():.3f} ± {scores.std():.3f}** (mean ± std over {len(scores)} seeds of "
         f"the final models, each re-evaluated on {args.final_eval_episodes} fresh episodes; return "

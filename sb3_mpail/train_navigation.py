@@ -26,14 +26,15 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
-from sb3_mpail.demos import DemoSource, load_demo_episodes, shipped_demo_info
+from sb3_mpail.demos import DemoSource, list_shipped_demos, load_demo_episodes, shipped_demo_info
 from sb3_mpail.evaluation import evaluate_episodes, normalised_score, reference_returns
 from sb3_mpail.mpail import MPAIL
 
 ENV_ID = "sb3_mpail/Navigation-v0"
 #: the shipped demo set trained on by default (1 and 16 demos are shipped too)
 DEFAULT_DEMOS = "navigation_4"
-#: the shipped demo family whose expert and random returns the normalised score is measured against
+#: the shipped demo family whose expert and random returns the normalised score is measured against when the demos
+#: are not a shipped set (a set is measured against its own expert)
 REFERENCE = "navigation"
 #: evaluation envs are seeded from ``seed + EVAL_SEED_OFFSET`` so they never replay the training starts
 EVAL_SEED_OFFSET = 10_000
@@ -65,6 +66,21 @@ ALGORITHM_OPTIONS = {
 }
 
 
+def reference_family(demos: DemoSource) -> str:
+    """
+    The shipped demo family the normalised score of a run on ``demos`` is measured against: a shipped set's own
+    (``navigation_circling_4`` -> ``navigation_circling``), else :data:`REFERENCE`.
+
+    :param demos: the demos trained on
+    """
+    return demos.rsplit("_", 1)[0] if isinstance(demos, str) and demos in list_shipped_demos() else REFERENCE
+
+
+def reference_of(demos: DemoSource) -> Dict[str, Any]:
+    """:func:`reference_family`'s information file (its expert's and random policy's returns)."""
+    return shipped_demo_info(reference_family(demos))
+
+
 def make_model(
     demos: DemoSource = DEFAULT_DEMOS,
     n_envs: int = DEFAULT_N_ENVS,
@@ -72,6 +88,7 @@ def make_model(
     device: str = "cpu",
     policy_kwargs: Dict[str, Any] | None = None,
     verbose: int = 0,
+    env_kwargs: Dict[str, Any] | None = None,
     **algorithm_kwargs: Any,
 ) -> MPAIL:
     """
@@ -83,9 +100,11 @@ def make_model(
     :param seed: seed of the envs, networks and planner noise
     :param device: ``"cpu"``, ``"cuda"`` or ``"auto"``
     :param policy_kwargs: planner settings replacing :data:`DEFAULT_POLICY_KWARGS` key by key
+    :param verbose: MPAIL's verbosity
+    :param env_kwargs: keyword arguments of the training envs (e.g. a wider ``start_region``)
     :param algorithm_kwargs: MPAIL constructor arguments replacing :data:`DEFAULT_ALGORITHM_KWARGS` key by key
     """
-    env = make_vec_env(ENV_ID, n_envs=n_envs, seed=seed)
+    env = make_vec_env(ENV_ID, n_envs=n_envs, seed=seed, env_kwargs=env_kwargs)
     return MPAIL(
         "MlpMPPI",
         env,
@@ -139,17 +158,25 @@ class LearningCurveCallback(BaseCallback):
     :param eval_freq: env steps between evaluations
     :param n_eval_episodes: episodes per evaluation
     :param seed: seed of the evaluation envs' start draws
+    :param reference: the information file the score is measured against (:func:`reference_of`)
     :param verbose: print each evaluation when positive
     """
 
-    def __init__(self, eval_freq: int, n_eval_episodes: int = 10, seed: int = EVAL_SEED_OFFSET, verbose: int = 0):
+    def __init__(
+        self,
+        eval_freq: int,
+        n_eval_episodes: int = 10,
+        seed: int = EVAL_SEED_OFFSET,
+        reference: Dict[str, Any] | None = None,
+        verbose: int = 0,
+    ):
         super().__init__(verbose)
         self.eval_freq = eval_freq
         self.n_eval_episodes = n_eval_episodes
         self.eval_seed = seed
         self.curve: List[Tuple[int, float, float]] = []
         self.eval_seconds = 0.0
-        self.reference = shipped_demo_info(REFERENCE)
+        self.reference = reference if reference is not None else shipped_demo_info(REFERENCE)
         self._next = eval_freq
 
     def _on_step(self) -> bool:
@@ -283,7 +310,9 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     )
     callback = None
     if args.eval_freq > 0:
-        callback = LearningCurveCallback(args.eval_freq, args.n_eval_episodes, seed=args.seed + EVAL_SEED_OFFSET, verbose=1)
+        callback = LearningCurveCallback(
+            args.eval_freq, args.n_eval_episodes, seed=args.seed + EVAL_SEED_OFFSET, reference=reference_of(demos), verbose=1
+        )
     started = time.perf_counter()
     model.learn(settings["timesteps"], callback=callback, progress_bar=progress_bar)
     train_seconds = time.perf_counter() - started
@@ -293,7 +322,7 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     model.save(model_path)
 
     mean_return, std_return = evaluate(model, args.n_eval_episodes, seed=args.seed + EVAL_SEED_OFFSET)
-    reference = shipped_demo_info(REFERENCE)
+    reference = reference_of(demos)
     score = normalised_score(mean_return, reference)
     if callback is not None:
         # the curve ends with this evaluation of the final model (one taken before the last update is replaced)

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from sb3_mpail import MPAIL
-from sb3_mpail.demos import SHIPPED_DEMO_DIR, load_demos, shipped_demo_info
+from sb3_mpail.demos import SHIPPED_DEMO_DIR, load_demos
 from sb3_mpail.envs.navigation import OOD_HALF_WIDTH
 from sb3_mpail.evaluation import normalised_score, reference_returns
-from sb3_mpail.train_navigation import REFERENCE, main, parse_args, settings_from_args
+from sb3_mpail.train_navigation import DEFAULT_DEMOS, main, parse_args, reference_of, settings_from_args
 
 TINY = [
     "--timesteps", "200", "--n-envs", "2", "--n-steps", "50",
@@ -36,7 +36,7 @@ def test_main_command_trains_evaluates_saves_and_plots(trained):
     assert written["algorithm_kwargs"]["n_steps"] == 50
     assert np.isfinite(written["mean_return"])
     assert written["demos"] == "navigation_4"  # the shipped demo set, by name
-    assert written["normalized_score"] == pytest.approx(normalised_score(written["mean_return"], shipped_demo_info(REFERENCE)))
+    assert written["normalized_score"] == pytest.approx(normalised_score(written["mean_return"], reference_of(DEFAULT_DEMOS)))
     # learning curve every 100 steps, ending with the final model's evaluation
     assert [point["steps"] for point in written["learning_curve"]] == [100, 200]
     assert written["learning_curve"][-1]["normalized_score"] == written["normalized_score"]
@@ -75,7 +75,7 @@ def test_shipped_demos_load_against_the_registered_env_observation_space(n_demos
 
 
 def test_normalised_score_is_0_for_random_and_1_for_the_expert():
-    reference = shipped_demo_info(REFERENCE)
+    reference = reference_of(DEFAULT_DEMOS)
     random_return, expert_return = reference_returns(reference)
     assert expert_return > 1000 > 0 > random_return
     assert normalised_score(random_return, reference) == pytest.approx(0.0)
