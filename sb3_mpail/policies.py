@@ -62,10 +62,10 @@ class MPPIPolicy(BasePolicy):
     :param value_hidden_sizes: hidden widths of the value network
     :param use_spectral_norm: spectral normalisation on the discriminator's layers
     :param discriminator_features: what the discriminator sees of a state: a fixed map ``features(states) ->
-        (batch, n_features)`` on ``(batch, state_dim)`` tensors (an ``nn.Module``, a picklable function, or a list of
-        the state indices kept), applied to
-        ``s`` and ``s'`` before the discriminator, which is built on ``n_features`` inputs. The planner, the dynamics
-        and the value still use the full state. ``None``: the full observation. Its parameters, if any, are saved
+        (batch, n_features)`` on ``(batch, state_dim)`` tensors (an ``nn.Module``, a picklable function, a list of
+        the state indices kept, or ``{"angles": [indices]}`` for :class:`~sb3_mpail.mppi.costs.AngleFeatures`),
+        applied to ``s`` and ``s'`` before the discriminator, which is built on ``n_features`` inputs. The planner and
+        the dynamics still use the full state. ``None``: the full observation. Its parameters, if any, are saved
         but not trained. Functions are saved with cloudpickle (module-level functions by reference, so their
         module must be importable when loading; lambdas and closures by value)
     :param value_features: what the value sees of a state, the same kinds of map as ``discriminator_features``

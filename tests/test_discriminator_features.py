@@ -10,6 +10,7 @@ from torch import nn
 
 from sb3_mpail import MPAIL
 from sb3_mpail.mppi import AngleFeatures
+from sb3_mpail.mppi.costs import FeatureMap
 from sb3_mpail.mppi.fused import Workspace
 
 TINY_PLANNER = dict(n_samples=16, horizon=3, n_iterations=2)
@@ -170,3 +171,10 @@ def test_the_value_plans_and_learns_on_its_own_features_and_is_saved_with_them(d
     loaded = MPAIL.load(tmp_path / "model")
     with th.no_grad():
         assert th.equal(loaded.policy.planner.terminal_value(states), values)
+
+
+def test_a_dict_of_angles_names_angle_features_as_a_yaml_file_can():
+    features = FeatureMap.wrap({"angles": [5]})
+    assert isinstance(features, AngleFeatures) and features.angle_indices == [5]
+    with pytest.raises(ValueError, match="one key, 'angles'"):
+        FeatureMap.wrap({"angle": [5]})

@@ -5,7 +5,7 @@ In MPAIL the step cost is the negated discriminator logit, ``c(s, s') = -d_theta
 is the learned ``V_phi``, so both are thin views of networks the algorithm trains.
 """
 
-from typing import Callable, Optional, Sequence, Union
+from typing import Callable, Mapping, Optional, Sequence, Union
 
 import numpy as np
 import torch as th
@@ -17,7 +17,8 @@ from torch.nn.utils.parametrizations import spectral_norm
 
 from sb3_mpail.mppi.fused import FusedTransitionCost, FusedValue, ViewCache, freeze_mlp, fused_mlp_ok
 
-FeatureSpec = Union[nn.Module, Callable[[th.Tensor], th.Tensor], Sequence[int]]
+#: what a network sees of a state: a module, a function, state indices, or ``{"angles": [indices]}``
+FeatureSpec = Union[nn.Module, Callable[[th.Tensor], th.Tensor], Sequence[int], Mapping[str, Sequence[int]]]
 
 
 def make_transition_discriminator(
@@ -110,9 +111,16 @@ class FeatureMap(nn.Module):
 
     @classmethod
     def wrap(cls, features: FeatureSpec) -> nn.Module:
-        """The module itself, a :class:`FeatureSelection` of state indices, or a function wrapped in a :class:`FeatureMap`."""
+        """
+        The module itself, a :class:`FeatureSelection` of state indices, :class:`AngleFeatures` for ``{"angles":
+        [indices]}`` (a form a YAML hyperparameter file can hold), or a function wrapped in a :class:`FeatureMap`.
+        """
         if isinstance(features, nn.Module):
             return features
+        if isinstance(features, Mapping):
+            if set(features) != {"angles"}:
+                raise ValueError(f"A dict of discriminator or value features takes one key, 'angles'; got {dict(features)}.")
+            return AngleFeatures(features["angles"])
         if isinstance(features, Sequence) and len(features) > 0 and all(isinstance(index, int) for index in features):
             return FeatureSelection(features)
         if not callable(features):

@@ -1,0 +1,266 @@
+"""
+What makes MPAIL's navigation planner reach the goal from out-of-distribution starts: one training setting changed at
+a time around the main command's defaults, each over several seeds, each model measured in distribution and from
+the 40 x 40 m box of the paper's OOD test.
+
+Every variant trains as ``python -m sb3_mpail.train_navigation`` does (its defaults, :func:`make_model`), with the
+changes listed in :data:`VARIANTS`, then is evaluated deterministically: in distribution on 50 episodes (score against
+the demos' own expert), and from 200 starts uniform in the 40 x 40 m box with uniform heading (the same starts for
+every variant and seed), measured as the grid runner measures every algorithm (:func:`benchmarks.runner.ood_measures`)
+plus the share of episodes that end circling (yaw rate above 2 rad/s over the last 50 steps). Results go to
+``benchmarks/results/navigation_ablations/<variant>_seed<N>.json`` (a rerun skips finished runs), the table to the
+``navigation-ablations`` section of BENCHMARKS.md.
+
+Usage::
+
+    python -m benchmarks.navigation_ablations --seeds 0 1 2 --workers 2          # every variant
+    python -m benchmarks.navigation_ablations --variants defaults stopping-demos --seeds 0 1 2
+    python -m benchmarks.navigation_ablations --report-only
+"""
+
+import argparse
+import json
+import multiprocessing
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Sequence
+
+import numpy as np
+import torch as th
+
+from benchmarks.report import machine_description, write_section
+from benchmarks.runner import GOAL_RADIUS, OOD_SEED, _format, mean_ci, ood_measures
+from sb3_mpail.envs.navigation import REWARD_OFFSET
+from sb3_mpail.evaluation import evaluate_episodes, normalised_score
+from sb3_mpail.mppi import AngleFeatures
+from sb3_mpail.train_navigation import (
+    DEFAULT_DEMOS,
+    DEFAULT_N_ENVS,
+    DEFAULT_TIMESTEPS,
+    ENV_ID,
+    PAPER_ALGORITHM_KWARGS,
+    PAPER_N_ENVS,
+    PAPER_POLICY_KWARGS,
+    PAPER_TIMESTEPS,
+    make_model,
+    reference_of,
+)
+
+RESULTS_DIR = Path(__file__).resolve().parent / "results" / "navigation_ablations"
+MODELS_DIR = Path(__file__).resolve().parent.parent / "runs" / "benchmarks" / "navigation_ablations"
+#: in-distribution evaluation episodes start from ``reset(seed=ID_SEED + i)``
+ID_SEED = 30_000
+N_ID_EPISODES, N_OOD_STARTS = 50, 200
+#: an episode "ends circling" when its mean absolute yaw rate over the last half exceeds this (rad/s)
+CIRCLING_YAW_RATE = 2.0
+
+
+@dataclass(frozen=True)
+class Variant:
+    """
+    One training setting against the defaults.
+
+    :param question: what the row tests, as the table says it
+    :param policy_kwargs: planner settings replacing the main command's, built per run (modules are not shared)
+    :param algorithm_kwargs: MPAIL arguments replacing the main command's
+    :param demos: the shipped demo set trained on
+    :param timesteps: env steps
+    :param n_envs: training envs
+    :param env_kwargs: the training envs' keyword arguments (a wider start region)
+    :param counts: whether the row trains as the paper does (the 1 x 1 m start region, the shipped demos): rows that
+        do not are reported apart and never count for the out-of-distribution target
+    """
+
+    question: str
+    policy_kwargs: Callable[[], Dict[str, Any]] = dict
+    algorithm_kwargs: Dict[str, Any] = field(default_factory=dict)
+    demos: str = DEFAULT_DEMOS
+    timesteps: int = DEFAULT_TIMESTEPS
+    n_envs: int = DEFAULT_N_ENVS
+    env_kwargs: Dict[str, Any] | None = None
+    counts: bool = True
+
+
+def headings() -> Dict[str, Any]:
+    """The heading as cosine and sine for both networks."""
+    return dict(discriminator_features=AngleFeatures([5]), value_features=AngleFeatures([5]))
+
+
+#: every variant, by name
+VARIANTS: Dict[str, Variant] = {
+    "defaults": Variant("the main command's defaults"),
+    "stopping-demos": Variant("demos of an expert that stops on the goal (navigation_4)", demos="navigation_4"),
+    "gaussian-sampler": Variant(
+        "Gaussian sampling (the paper's) instead of delta sampling", lambda: dict(sampler="gaussian", noise_std=0.3)
+    ),
+    "raw-heading": Variant(
+        "the raw wrapped yaw as the networks' input", lambda: dict(discriminator_features=None, value_features=None)
+    ),
+    "heading-discriminator-only": Variant(
+        "cosine and sine of the heading for the discriminator only", lambda: dict(value_features=None)
+    ),
+    "steering-unlimited": Variant(
+        "delta sampling limiting the speed's steps only (max delta [0.2, 1.0])",
+        lambda: dict(sampler_kwargs=dict(max_delta=[0.2, 1.0])),
+    ),
+    "discriminator-replay": Variant(
+        "the discriminator also sees the last 10 rollouts (8000 agent transitions)",
+        algorithm_kwargs=dict(discriminator_replay_size=8000),
+    ),
+    "learned-temperature": Variant(
+        "the authors' learned temperature (RMSprop on log lambda, weight entropy)",
+        algorithm_kwargs=dict(temperature="learned"),
+    ),
+    "horizon-20": Variant("horizon 20 instead of 10", lambda: dict(horizon=20)),
+    "authors-planner": Variant(
+        "the authors' code: horizon 20, K 1024, J 2, discriminator 16 x 16 with L2 1e-3",
+        lambda: dict(horizon=20, n_samples=1024, n_iterations=2, discriminator_hidden_sizes=(16, 16)),
+        algorithm_kwargs=dict(discriminator_l2=1e-3),
+    ),
+    "cost-only-h5": Variant("cost only (no terminal value), horizon 5", lambda: dict(use_terminal_value=False, horizon=5)),
+    "cost-only-h10": Variant("cost only (no terminal value), horizon 10", lambda: dict(use_terminal_value=False)),
+    "cost-only-h20": Variant("cost only (no terminal value), horizon 20", lambda: dict(use_terminal_value=False, horizon=20)),
+    "value-only-h5": Variant("value only (no step costs), horizon 5", lambda: dict(use_step_cost=False, horizon=5)),
+    "value-only-h10": Variant("value only (no step costs), horizon 10", lambda: dict(use_step_cost=False)),
+    "value-only-h20": Variant("value only (no step costs), horizon 20", lambda: dict(use_step_cost=False, horizon=20)),
+    "paper-scale": Variant(
+        "the paper's planner and budget: N 512, H 10, J 5, 64 envs x 200 steps, discriminator every 3rd iteration, 1M",
+        lambda: dict(PAPER_POLICY_KWARGS),
+        algorithm_kwargs=dict(PAPER_ALGORITHM_KWARGS),
+        timesteps=PAPER_TIMESTEPS,
+        n_envs=PAPER_N_ENVS,
+    ),
+    "paper-scale-every-iteration": Variant(
+        "the paper's planner and budget with the discriminator updated every iteration",
+        lambda: dict(PAPER_POLICY_KWARGS),
+        algorithm_kwargs=dict(PAPER_ALGORITHM_KWARGS, discriminator_update_interval=1),
+        timesteps=PAPER_TIMESTEPS,
+        n_envs=PAPER_N_ENVS,
+    ),
+    "wide-starts": Variant(
+        "training starts anywhere in a 10 x 10 m box (not the paper's training: reported apart)",
+        env_kwargs=dict(start_region=5.0),
+        counts=False,
+    ),
+}
+
+
+def result_path(variant: str, seed: int, results_dir: Path = RESULTS_DIR) -> Path:
+    return Path(results_dir) / f"{variant}_seed{seed}.json"
+
+
+def circling_share(observations: Sequence[np.ndarray]) -> float:
+    """The share of episodes whose mean absolute yaw rate (observation 11) over their last half exceeds 2 rad/s."""
+    return float(np.mean([np.abs(o[len(o) // 2 :, 11]).mean() > CIRCLING_YAW_RATE for o in observations]))
+
+
+def run_variant(name: str, seed: int, results_dir: Path = RESULTS_DIR, models_dir: Path = MODELS_DIR) -> Path:
+    """
+    Trains one variant on one seed, evaluates it and writes its result (skipped when the file exists).
+
+    :param name: a key of :data:`VARIANTS`
+    :param seed: training seed
+    :return: the result file
+    """
+    path = result_path(name, seed, results_dir)
+    if path.exists():
+        return path
+    th.set_num_threads(1)
+    variant = VARIANTS[name]
+    model = make_model(variant.demos, n_envs=variant.n_envs, seed=seed, policy_kwargs=variant.policy_kwargs(),
+                       env_kwargs=variant.env_kwargs, **variant.algorithm_kwargs)  # fmt: skip
+    started = time.perf_counter()
+    model.learn(variant.timesteps)
+    train_seconds = time.perf_counter() - started
+    model.save(Path(models_dir) / f"{name}_seed{seed}.zip")
+    in_distribution = evaluate_episodes(model, ENV_ID, N_ID_EPISODES, ID_SEED + seed, n_envs=10)
+    ood = evaluate_episodes(model, ENV_ID, N_OOD_STARTS, OOD_SEED, env_kwargs=dict(start_region="ood"),
+                            record_observations=True)  # fmt: skip
+    record = dict(
+        start_poses=[[float(o[0][0]), float(o[0][1]), float(o[0][5])] for o in ood.observations],
+        final_positions=[[float(o[-1][0]), float(o[-1][1])] for o in ood.observations],
+        final_rewards=[REWARD_OFFSET - info["distance_to_goal"] for info in ood.final_infos],
+    )
+    result = dict(
+        variant=name, seed=seed, question=variant.question, counts=variant.counts, demos=variant.demos,
+        timesteps=variant.timesteps, n_envs=variant.n_envs, train_seconds=round(train_seconds, 1),
+        id_return=in_distribution.mean_return,
+        id_score=normalised_score(in_distribution.mean_return, reference_of(variant.demos)), ood=record,
+        ood_circling=circling_share(ood.observations), **ood_measures(record),
+    )  # fmt: skip
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(result))
+    return path
+
+
+def report(results_dir: Path, names: Sequence[str], command: str) -> str:
+    """
+    The ``navigation-ablations`` section: per variant, means and 95% CIs over its seeds.
+
+    :param results_dir: where the results are
+    :param names: the variants, in table order
+    :param command: the command line to quote
+    """
+    columns = ("id_score", "reached_reachable", "final_reward", "progress", "ood_circling")
+    header = [
+        "| variant | what changes | seeds | in-distribution score | OOD: within 2 m, reachable starts | OOD: mean final "
+        "reward | OOD: mean progress | OOD: ends circling |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    rows: Dict[bool, List[str]] = {True: [], False: []}
+    for name in names:
+        runs = [json.loads(p.read_text()) for p in sorted(Path(results_dir).glob(f"{name}_seed*.json"))]
+        if not runs:
+            continue
+        cells = [_format(*mean_ci([run[column] for run in runs])) for column in columns]
+        variant = VARIANTS[name]
+        rows[variant.counts].append(f"| `{name}` | {variant.question} | {len(runs)} | " + " | ".join(cells) + " |")
+    lines = [
+        "## Navigation ablations: what makes the planner generalise",
+        "",
+        "Each variant changes one setting of the main command's defaults (`python -m sb3_mpail.train_navigation`: "
+        f"{DEFAULT_TIMESTEPS} env steps, {DEFAULT_N_ENVS} envs, demos `{DEFAULT_DEMOS}` unless a row says otherwise). "
+        f"In distribution: the deterministic planner's normalised score on {N_ID_EPISODES} episodes from the training "
+        f"start region, against the demos' own expert. Out of distribution: {N_OOD_STARTS} deterministic 100-step "
+        f"episodes from starts uniform in the 40 x 40 m box with uniform heading (seeds {OOD_SEED}+, the same starts "
+        f"for every row); within {GOAL_RADIUS:g} m of the goal among the starts within 32 m (reachable at the 3 m/s "
+        "top speed), mean final reward (sqrt(200) - final distance), mean progress ((start - final distance) / start "
+        f"distance), share of episodes ending in a circle (yaw rate > {CIRCLING_YAW_RATE:g} rad/s over their last "
+        "half). Means ± 95% CI (Student's t) over seeds.",
+        "",
+        *header,
+        *rows[True],
+    ]
+    if rows[False]:
+        lines += ["", "Not trained as the paper trains (reported apart; these never count for the OOD target):", "",
+                  *header, *rows[False]]  # fmt: skip
+    lines += ["", f"Command: `{command}` on {machine_description()}."]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--workers", type=int, default=1, help="runs trained at once, one torch thread each")
+    parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR)
+    parser.add_argument("--report-only", action="store_true", help="only rewrite the section from stored results")
+    args = parser.parse_args()
+    if not args.report_only:
+        jobs = [(name, seed) for name in args.variants for seed in args.seeds
+                if not result_path(name, seed, args.results_dir).exists()]  # fmt: skip
+        print(f"{len(jobs)} runs to do", flush=True)
+        with ProcessPoolExecutor(max(1, args.workers), mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = [pool.submit(run_variant, name, seed, args.results_dir) for name, seed in jobs]
+            for future in futures:
+                print("wrote", future.result(), flush=True)
+    names = [name for name in VARIANTS if name in args.variants or any(Path(args.results_dir).glob(f"{name}_seed*.json"))]
+    seeds = " ".join(map(str, args.seeds))
+    command = f"python -m benchmarks.navigation_ablations --seeds {seeds}"
+    write_section("navigation-ablations", report(args.results_dir, names, command))
+
+
+if __name__ == "__main__":
+    main()
