@@ -29,9 +29,11 @@ from typing import Any, Callable, Dict, List, Sequence
 
 import numpy as np
 import torch as th
+from torch import nn
 
 from benchmarks.report import machine_description, write_section
 from benchmarks.runner import GOAL_RADIUS, OOD_SEED, _format, mean_ci, ood_measures
+from sb3_mpail.demos import shipped_demos
 from sb3_mpail.envs.navigation import REWARD_OFFSET
 from sb3_mpail.evaluation import evaluate_episodes, normalised_score
 from sb3_mpail.mppi import AngleFeatures
@@ -83,9 +85,31 @@ class Variant:
     counts: bool = True
 
 
-def headings() -> Dict[str, Any]:
-    """The heading as cosine and sine for both networks."""
-    return dict(discriminator_features=AngleFeatures([5]), value_features=AngleFeatures([5]))
+class Standardise(nn.Module):
+    """
+    ``(x - mean) / scale`` per input, with the demos' statistics; the scale is floored at 1 so that inputs the demos
+    hold nearly constant (height, roll, pitch) are not blown up.
+
+    :param mean: the demos' mean input
+    :param scale: the demos' standard deviation
+    """
+
+    def __init__(self, mean: th.Tensor, scale: th.Tensor):
+        super().__init__()
+        self.register_buffer("mean", mean)
+        self.register_buffer("scale", scale.clamp(min=1.0))
+
+    def forward(self, inputs: th.Tensor) -> th.Tensor:
+        return (inputs - self.mean) / self.scale
+
+
+def standardised_headings() -> Dict[str, Any]:
+    """Both networks on the heading as cosine and sine, standardised with the default demos' statistics."""
+    headings = AngleFeatures([5])
+    family, n_demos = DEFAULT_DEMOS.rsplit("_", 1)
+    features = headings(th.as_tensor(np.concatenate([t.obs for t in shipped_demos(family, int(n_demos))])))
+    standardised = nn.Sequential(headings, Standardise(features.mean(0), features.std(0)))
+    return dict(discriminator_features=standardised, value_features=standardised)
 
 
 #: every variant, by name
@@ -104,6 +128,9 @@ VARIANTS: Dict[str, Variant] = {
     "steering-unlimited": Variant(
         "delta sampling limiting the speed's steps only (max delta [0.2, 1.0])",
         lambda: dict(sampler_kwargs=dict(max_delta=[0.2, 1.0])),
+    ),
+    "standardised-inputs": Variant(
+        "both networks' inputs standardised with the demos' statistics (scale floored at 1)", standardised_headings
     ),
     "discriminator-replay": Variant(
         "the discriminator also sees the last 10 rollouts (8000 agent transitions)",

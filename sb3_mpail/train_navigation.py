@@ -31,29 +31,35 @@ from sb3_mpail.evaluation import evaluate_episodes, normalised_score, reference_
 from sb3_mpail.mpail import MPAIL
 
 ENV_ID = "sb3_mpail/Navigation-v0"
-#: the shipped demo set trained on by default (1 and 16 demos are shipped too)
-DEFAULT_DEMOS = "navigation_4"
+#: the shipped demo set trained on by default: 4 demos of an expert that circles on the goal, as the paper's does (1 and
+#: 16 are shipped too, and ``navigation_<n>``, an expert that stops on the goal)
+DEFAULT_DEMOS = "navigation_circling_4"
 #: the shipped demo family whose expert and random returns the normalised score is measured against when the demos
 #: are not a shipped set (a set is measured against its own expert)
 REFERENCE = "navigation"
 #: evaluation envs are seeded from ``seed + EVAL_SEED_OFFSET`` so they never replay the training starts
 EVAL_SEED_OFFSET = 10_000
 
-#: CPU defaults, tuned to reach near-expert return on 2 CPU cores in minutes (see BENCHMARKS.md, "navigation");
-#: 200 iterations of 8 envs x 100 steps
+#: CPU defaults, chosen on 2 CPU cores by the ablations of BENCHMARKS.md ("navigation-ablations"): 200 iterations of 8
+#: envs x 100 steps; delta sampling (the authors' sampler: increments of std [1.0, 0.5], each step at most 0.5 of the
+#: half-range) lets the plan hold full speed, which Gaussian samples clamped at the bound do not
 DEFAULT_TIMESTEPS = 160_000
 DEFAULT_N_ENVS = 8
-DEFAULT_POLICY_KWARGS: Dict[str, Any] = dict(n_samples=256, horizon=10, n_iterations=3)
+DEFAULT_POLICY_KWARGS: Dict[str, Any] = dict(
+    n_samples=256, horizon=10, n_iterations=3, sampler="delta", noise_std=[1.0, 0.5], sampler_kwargs=dict(max_delta=0.5)
+)
 DEFAULT_ALGORITHM_KWARGS: Dict[str, Any] = dict(n_steps=100, discriminator_update_interval=1)
 
-#: the paper's table (N 512, H 10, J 5) with 64 envs and 200 steps per env per iteration, for a GPU run
+#: the paper's table (N 512, H 10, J 5, Gaussian samples of std 0.3) with 64 envs and 200 steps per env per iteration,
+#: for a GPU run
 PAPER_TIMESTEPS = 1_000_000
 PAPER_N_ENVS = 64
-PAPER_POLICY_KWARGS: Dict[str, Any] = dict(n_samples=512, horizon=10, n_iterations=5)
+PAPER_POLICY_KWARGS: Dict[str, Any] = dict(n_samples=512, horizon=10, n_iterations=5, sampler="gaussian", noise_std=0.3,
+                                            sampler_kwargs=None)  # fmt: skip
 PAPER_ALGORITHM_KWARGS: Dict[str, Any] = dict(n_steps=200, discriminator_update_interval=3)
 
 # command-line planner and algorithm overrides: option name -> (keyword, type, where it goes)
-POLICY_OPTIONS = {"n_samples": int, "horizon": int, "n_iterations": int, "noise_std": float, "markup": float}
+POLICY_OPTIONS = {"n_samples": int, "horizon": int, "n_iterations": int, "noise_std": float, "markup": float, "sampler": str}
 ALGORITHM_OPTIONS = {
     "n_steps": int,
     "discriminator_update_interval": int,

@@ -32,6 +32,7 @@ CARTPOLE, LAP = "sb3_mpail/ContinuousCartPole-v0", "sb3_mpail/NavigationLap-v0"
 #: per algorithm, overrides that shrink a real config entry to one round of a few dozen env steps
 TINY = {
     "mpail": dict(n_envs=2, n_steps=16, policy_kwargs="dict(n_samples=16, horizon=3, n_iterations=1)"),
+    "mpail_om": dict(n_envs=2, n_steps=16, policy_kwargs="dict(dynamics='learned', n_samples=16, horizon=3, n_iterations=1)"),
     "gail": dict(n_envs=2, n_steps=16, batch_size=32, n_epochs=1, n_timesteps=64),
     "airl": dict(n_envs=2, n_steps=16, batch_size=32, n_epochs=1, n_timesteps=64),
     "bc": dict(n_epochs=1),

@@ -12,6 +12,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import VecVideoRecorder
 
 import sb3_mpail.envs  # noqa: F401  (registers the environments)
+from sb3_mpail.demos import shipped_demos
 from sb3_mpail.envs.lap import lap_driver
 from sb3_mpail.envs.navigation import (
     CAR_COLOUR,
@@ -22,7 +23,6 @@ from sb3_mpail.envs.navigation import (
     NavigationEnv,
 )
 
-ROOT = Path(__file__).resolve().parent.parent
 NAVIGATION_ID = "sb3_mpail/Navigation-v0"
 LAP_ID = "sb3_mpail/NavigationLap-v0"
 
@@ -76,8 +76,7 @@ def test_the_car_s_pixels_move_as_the_car_drives():
 
 
 def test_the_picture_shows_the_goal_and_the_reference_paths():
-    with np.load(ROOT / "demos" / "navigation_4.npz") as data:
-        demos = data["obs"]
+    demos = [trajectory.obs for trajectory in shipped_demos("navigation_circling", 4)]
     navigation = NavigationEnv(render_mode="rgb_array", reference_paths=[demo[:, :2] for demo in demos])
     navigation.reset(seed=0)
     frame = navigation.render()
@@ -138,7 +137,7 @@ def test_zoo_record_video_films_a_trained_planner(tmp_path):
     config = tmp_path / "mpail.yml"
     config.write_text(
         f"{NAVIGATION_ID}:\n  n_timesteps: 32\n  n_envs: 2\n  policy: 'MlpMPPI'\n"
-        f"  demos: {ROOT / 'demos' / 'navigation_4.npz'}\n  n_steps: 16\n"
+        "  demos: navigation_circling_4\n  n_steps: 16\n"
         '  policy_kwargs: "dict(n_samples=8, horizon=3, n_iterations=1)"\n'
     )
     logs = tmp_path / "logs"

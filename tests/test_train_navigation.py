@@ -10,7 +10,15 @@ from sb3_mpail import MPAIL
 from sb3_mpail.demos import SHIPPED_DEMO_DIR, load_demos
 from sb3_mpail.envs.navigation import OOD_HALF_WIDTH
 from sb3_mpail.evaluation import normalised_score, reference_returns
-from sb3_mpail.train_navigation import DEFAULT_DEMOS, main, parse_args, reference_of, settings_from_args
+from sb3_mpail.train_navigation import (
+    DEFAULT_DEMOS,
+    DEFAULT_POLICY_KWARGS,
+    PAPER_POLICY_KWARGS,
+    main,
+    parse_args,
+    reference_of,
+    settings_from_args,
+)
 
 TINY = [
     "--timesteps", "200", "--n-envs", "2", "--n-steps", "50",
@@ -32,10 +40,10 @@ def test_main_command_trains_evaluates_saves_and_plots(trained):
     assert (out_dir / "navigation.png").stat().st_size > 10_000
     written = json.loads((out_dir / "results.json").read_text())
     assert written["timesteps"] == 200 and written["n_envs"] == 2
-    assert written["policy_kwargs"] == dict(n_samples=8, horizon=3, n_iterations=1)
+    assert written["policy_kwargs"] == dict(DEFAULT_POLICY_KWARGS, n_samples=8, horizon=3, n_iterations=1)
     assert written["algorithm_kwargs"]["n_steps"] == 50
     assert np.isfinite(written["mean_return"])
-    assert written["demos"] == "navigation_4"  # the shipped demo set, by name
+    assert written["demos"] == DEFAULT_DEMOS == "navigation_circling_4"  # the shipped demo set, by name
     assert written["normalized_score"] == pytest.approx(normalised_score(written["mean_return"], reference_of(DEFAULT_DEMOS)))
     # learning curve every 100 steps, ending with the final model's evaluation
     assert [point["steps"] for point in written["learning_curve"]] == [100, 200]
@@ -85,7 +93,8 @@ def test_normalised_score_is_0_for_random_and_1_for_the_expert():
 def test_paper_settings_and_overrides():
     paper = settings_from_args(parse_args(["--paper-settings", "--n-iterations", "2"]))
     assert paper["n_envs"] == 64
-    assert paper["policy_kwargs"] == dict(n_samples=512, horizon=10, n_iterations=2)
+    assert paper["policy_kwargs"] == dict(PAPER_POLICY_KWARGS, n_iterations=2)
+    assert paper["policy_kwargs"]["sampler"] == "gaussian"  # the paper's samples
     on_gpu = settings_from_args(parse_args(["--device", "cuda"]))
     assert on_gpu["timesteps"] == 1_000_000 and on_gpu["policy_kwargs"]["n_samples"] == 512
     default = settings_from_args(parse_args([]))
