@@ -119,15 +119,12 @@ VARIANTS: Dict[str, Variant] = {
     "gaussian-sampler": Variant(
         "Gaussian sampling (the paper's) instead of delta sampling", lambda: dict(sampler="gaussian", noise_std=0.3)
     ),
-    "raw-heading": Variant(
-        "the raw wrapped yaw as the networks' input", lambda: dict(discriminator_features=None, value_features=None)
+    "raw-heading": Variant("the discriminator sees the raw wrapped yaw", lambda: dict(discriminator_features=None)),
+    "heading-for-the-value-too": Variant(
+        "the value sees the heading as cosine and sine too", lambda: dict(value_features=dict(angles=[5]))
     ),
-    "heading-discriminator-only": Variant(
-        "cosine and sine of the heading for the discriminator only", lambda: dict(value_features=None)
-    ),
-    "steering-unlimited": Variant(
-        "delta sampling limiting the speed's steps only (max delta [0.2, 1.0])",
-        lambda: dict(sampler_kwargs=dict(max_delta=[0.2, 1.0])),
+    "delta-steps-0.2": Variant(
+        "delta sampling with the authors' step limit, 0.2, instead of 0.5", lambda: dict(sampler_kwargs=dict(max_delta=0.2))
     ),
     "standardised-inputs": Variant(
         "both networks' inputs standardised with the demos' statistics (scale floored at 1)", standardised_headings
@@ -142,8 +139,9 @@ VARIANTS: Dict[str, Variant] = {
     ),
     "horizon-20": Variant("horizon 20 instead of 10", lambda: dict(horizon=20)),
     "authors-planner": Variant(
-        "the authors' code: horizon 20, K 1024, J 2, discriminator 16 x 16 with L2 1e-3",
-        lambda: dict(horizon=20, n_samples=1024, n_iterations=2, discriminator_hidden_sizes=(16, 16)),
+        "the authors' code: horizon 20, K 1024, J 2, delta steps 0.2, discriminator 16 x 16 with L2 1e-3",
+        lambda: dict(horizon=20, n_samples=1024, n_iterations=2, sampler_kwargs=dict(max_delta=0.2),
+                     discriminator_hidden_sizes=(16, 16)),  # fmt: skip
         algorithm_kwargs=dict(discriminator_l2=1e-3),
     ),
     "cost-only-h5": Variant("cost only (no terminal value), horizon 5", lambda: dict(use_terminal_value=False, horizon=5)),
@@ -153,7 +151,8 @@ VARIANTS: Dict[str, Variant] = {
     "value-only-h10": Variant("value only (no step costs), horizon 10", lambda: dict(use_step_cost=False)),
     "value-only-h20": Variant("value only (no step costs), horizon 20", lambda: dict(use_step_cost=False, horizon=20)),
     "paper-scale": Variant(
-        "the paper's planner and budget: N 512, H 10, J 5, 64 envs x 200 steps, discriminator every 3rd iteration, 1M",
+        "the paper's planner and budget: Gaussian samples, N 512, H 10, J 5, 64 envs x 200 steps, discriminator every "
+        "3rd iteration, 1M steps",
         lambda: dict(PAPER_POLICY_KWARGS),
         algorithm_kwargs=dict(PAPER_ALGORITHM_KWARGS),
         timesteps=PAPER_TIMESTEPS,

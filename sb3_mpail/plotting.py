@@ -66,23 +66,20 @@ def learned_cost_map(
     :param n_headings: headings tried per point, evenly spaced in ``[-pi, pi)``
     :return: ``xs`` (resolution,), ``ys`` (resolution,), ``costs`` (resolution, resolution) indexed ``[y, x]``
     """
+    from sb3_mpail.inspect import NAVIGATION_AXES, grid_coordinates, step_cost_field
+
     policy = model.policy
-    device = policy.device
-    xs = np.linspace(extent[0], extent[1], resolution, dtype=np.float32)
-    ys = np.linspace(extent[2], extent[3], resolution, dtype=np.float32)
-    headings = -math.pi + 2 * math.pi * np.arange(n_headings, dtype=np.float32) / n_headings
-    grid_y, grid_x, grid_heading = np.meshgrid(ys, xs, headings, indexing="ij")
-    states = np.zeros((grid_x.size, policy.observation_space.shape[0]), dtype=np.float32)
-    states[:, 0], states[:, 1], states[:, 5] = grid_x.ravel(), grid_y.ravel(), grid_heading.ravel()
-    states[:, 6] = speed
-    states_t = th.as_tensor(states, device=device)
+    xs, ys = grid_coordinates(extent, resolution)
     max_speed = float(getattr(policy.dynamics, "max_speed", 3.0))
-    actions = th.zeros((len(states), policy.action_space.shape[0]), device=device)
-    actions[:, 0] = float(np.clip(speed / max_speed, -1.0, 1.0))
-    next_states = policy.dynamics(states_t, actions)
-    costs = -policy.discriminator(states_t, None, next_states, None)
-    costs = costs.view(resolution, resolution, n_headings).min(dim=-1).values
-    return xs, ys, costs.cpu().numpy()
+    action = np.zeros(policy.action_space.shape, dtype=np.float32)
+    action[0] = np.clip(speed / max_speed, -1.0, 1.0)
+    template = np.zeros(policy.observation_space.shape, dtype=np.float32)
+    template[NAVIGATION_AXES.speed_index] = speed
+    fields = []
+    for heading in -math.pi + 2 * math.pi * np.arange(n_headings) / n_headings:
+        template[NAVIGATION_AXES.heading_index] = heading
+        fields.append(step_cost_field(model, template, action, xs, ys, NAVIGATION_AXES))
+    return xs, ys, np.min(fields, axis=0)
 
 
 def plot_navigation(

@@ -42,12 +42,14 @@ EVAL_SEED_OFFSET = 10_000
 
 #: CPU defaults, chosen on 2 CPU cores by the ablations of BENCHMARKS.md ("navigation-ablations"): 200 iterations of 8
 #: envs x 100 steps; delta sampling (the authors' sampler: increments of std [1.0, 0.5], each step at most 0.5 of the
-#: half-range) lets the plan hold full speed, which Gaussian samples clamped at the bound do not
+#: half-range) lets the plan hold full speed, which Gaussian samples clamped at the bound do not; the discriminator
+#: sees the heading as its cosine and sine (``{"angles": [5]}``), not as the wrapped yaw it would extrapolate from
 DEFAULT_TIMESTEPS = 160_000
 DEFAULT_N_ENVS = 8
 DEFAULT_POLICY_KWARGS: Dict[str, Any] = dict(
-    n_samples=256, horizon=10, n_iterations=3, sampler="delta", noise_std=[1.0, 0.5], sampler_kwargs=dict(max_delta=0.5)
-)
+    n_samples=256, horizon=10, n_iterations=3, sampler="delta", noise_std=[1.0, 0.5], sampler_kwargs=dict(max_delta=0.5),
+    discriminator_features=dict(angles=[5]),
+)  # fmt: skip
 DEFAULT_ALGORITHM_KWARGS: Dict[str, Any] = dict(n_steps=100, discriminator_update_interval=1)
 
 #: the paper's table (N 512, H 10, J 5, Gaussian samples of std 0.3) with 64 envs and 200 steps per env per iteration,
@@ -55,7 +57,7 @@ DEFAULT_ALGORITHM_KWARGS: Dict[str, Any] = dict(n_steps=100, discriminator_updat
 PAPER_TIMESTEPS = 1_000_000
 PAPER_N_ENVS = 64
 PAPER_POLICY_KWARGS: Dict[str, Any] = dict(n_samples=512, horizon=10, n_iterations=5, sampler="gaussian", noise_std=0.3,
-                                            sampler_kwargs=None)  # fmt: skip
+                                            sampler_kwargs=None, discriminator_features=None)  # fmt: skip
 PAPER_ALGORITHM_KWARGS: Dict[str, Any] = dict(n_steps=200, discriminator_update_interval=3)
 
 # command-line planner and algorithm overrides: option name -> (keyword, type, where it goes)
