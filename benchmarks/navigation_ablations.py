@@ -150,6 +150,11 @@ VARIANTS: Dict[str, Variant] = {
     "value-only-h5": Variant("value only (no step costs), horizon 5", lambda: dict(use_step_cost=False, horizon=5)),
     "value-only-h10": Variant("value only (no step costs), horizon 10", lambda: dict(use_step_cost=False)),
     "value-only-h20": Variant("value only (no step costs), horizon 20", lambda: dict(use_step_cost=False, horizon=20)),
+    "wide-starts": Variant(
+        "training starts anywhere in a 10 x 10 m box (not the paper's training: reported apart)",
+        env_kwargs=dict(start_region=5.0),
+        counts=False,
+    ),
     "paper-scale": Variant(
         "the paper's planner and budget: Gaussian samples, N 512, H 10, J 5, 64 envs x 200 steps, discriminator every "
         "3rd iteration, 1M steps",
@@ -164,11 +169,6 @@ VARIANTS: Dict[str, Variant] = {
         algorithm_kwargs=dict(PAPER_ALGORITHM_KWARGS, discriminator_update_interval=1),
         timesteps=PAPER_TIMESTEPS,
         n_envs=PAPER_N_ENVS,
-    ),
-    "wide-starts": Variant(
-        "training starts anywhere in a 10 x 10 m box (not the paper's training: reported apart)",
-        env_kwargs=dict(start_region=5.0),
-        counts=False,
     ),
 }
 
