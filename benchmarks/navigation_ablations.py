@@ -32,9 +32,17 @@ import torch as th
 from torch import nn
 
 from benchmarks.report import machine_description, write_section
-from benchmarks.runner import GOAL_RADIUS, OOD_SEED, _format, mean_ci, ood_measures
+from benchmarks.runner import (
+    CIRCLING_YAW_RATE,
+    GOAL_RADIUS,
+    OOD_SEED,
+    format_ci,
+    mean_ci,
+    ood_episodes,
+    ood_measures,
+    ood_record,
+)
 from sb3_mpail.demos import shipped_demos
-from sb3_mpail.envs.navigation import REWARD_OFFSET
 from sb3_mpail.evaluation import evaluate_episodes, normalised_score
 from sb3_mpail.mppi import AngleFeatures
 from sb3_mpail.train_navigation import (
@@ -55,8 +63,6 @@ MODELS_DIR = Path(__file__).resolve().parent.parent / "runs" / "benchmarks" / "n
 #: in-distribution evaluation episodes start from ``reset(seed=ID_SEED + i)``
 ID_SEED = 30_000
 N_ID_EPISODES, N_OOD_STARTS = 50, 200
-#: an episode "ends circling" when its mean absolute yaw rate over the last half exceeds this (rad/s)
-CIRCLING_YAW_RATE = 2.0
 
 
 @dataclass(frozen=True)
@@ -177,11 +183,6 @@ def result_path(variant: str, seed: int, results_dir: Path = RESULTS_DIR) -> Pat
     return Path(results_dir) / f"{variant}_seed{seed}.json"
 
 
-def circling_share(observations: Sequence[np.ndarray]) -> float:
-    """The share of episodes whose mean absolute yaw rate (observation 11) over their last half exceeds 2 rad/s."""
-    return float(np.mean([np.abs(o[len(o) // 2 :, 11]).mean() > CIRCLING_YAW_RATE for o in observations]))
-
-
 def run_variant(name: str, seed: int, results_dir: Path = RESULTS_DIR, models_dir: Path = MODELS_DIR) -> Path:
     """
     Trains one variant on one seed, evaluates it and writes its result (skipped when the file exists).
@@ -202,19 +203,13 @@ def run_variant(name: str, seed: int, results_dir: Path = RESULTS_DIR, models_di
     train_seconds = time.perf_counter() - started
     model.save(Path(models_dir) / f"{name}_seed{seed}.zip")
     in_distribution = evaluate_episodes(model, ENV_ID, N_ID_EPISODES, ID_SEED + seed, n_envs=10)
-    ood = evaluate_episodes(model, ENV_ID, N_OOD_STARTS, OOD_SEED, env_kwargs=dict(start_region="ood"),
-                            record_observations=True)  # fmt: skip
-    record = dict(
-        start_poses=[[float(o[0][0]), float(o[0][1]), float(o[0][5])] for o in ood.observations],
-        final_positions=[[float(o[-1][0]), float(o[-1][1])] for o in ood.observations],
-        final_rewards=[REWARD_OFFSET - info["distance_to_goal"] for info in ood.final_infos],
-    )
+    record = ood_record(ood_episodes(model, N_OOD_STARTS))
     result = dict(
         variant=name, seed=seed, question=variant.question, counts=variant.counts, demos=variant.demos,
         timesteps=variant.timesteps, n_envs=variant.n_envs, train_seconds=round(train_seconds, 1),
         id_return=in_distribution.mean_return,
         id_score=normalised_score(in_distribution.mean_return, reference_of(variant.demos)), ood=record,
-        ood_circling=circling_share(ood.observations), **ood_measures(record),
+        **ood_measures(record),
     )  # fmt: skip
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(result))
@@ -229,7 +224,7 @@ def report(results_dir: Path, names: Sequence[str], command: str) -> str:
     :param names: the variants, in table order
     :param command: the command line to quote
     """
-    columns = ("id_score", "reached_reachable", "final_reward", "progress", "ood_circling")
+    columns = ("id_score", "reached_reachable", "final_reward", "progress", "circling")
     header = [
         "| variant | what changes | seeds | in-distribution score | OOD: within 2 m, reachable starts | OOD: mean final "
         "reward | OOD: mean progress | OOD: ends circling |",
@@ -240,7 +235,7 @@ def report(results_dir: Path, names: Sequence[str], command: str) -> str:
         runs = [json.loads(p.read_text()) for p in sorted(Path(results_dir).glob(f"{name}_seed*.json"))]
         if not runs:
             continue
-        cells = [_format(*mean_ci([run[column] for run in runs])) for column in columns]
+        cells = [format_ci(*mean_ci([run[column] for run in runs])) for column in columns]
         variant = VARIANTS[name]
         rows[variant.counts].append(f"| `{name}` | {variant.question} | {len(runs)} | " + " | ".join(cells) + " |")
     lines = [

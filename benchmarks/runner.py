@@ -38,7 +38,7 @@ from benchmarks.scenarios import RESULTS as SCENARIO_RESULTS
 from benchmarks.scenarios import SCENARIOS, lap_figures
 from sb3_mpail.demos import list_shipped_demos, shipped_demo_info, shipped_demos
 from sb3_mpail.envs.navigation import DT, MAX_SPEED, REWARD_OFFSET
-from sb3_mpail.evaluation import evaluate_episodes, normalised_score
+from sb3_mpail.evaluation import Episodes, evaluate_episodes, normalised_score
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 FIGURES_DIR = Path(__file__).resolve().parent / "figures"
@@ -49,6 +49,8 @@ EVAL_SEED, OOD_SEED = 10_000, 50_000
 #: an OOD episode "reaches the goal" when it ends within this distance of it (metres)
 GOAL_RADIUS = 2.0
 GOAL = np.array([10.0, 10.0])
+#: an OOD episode "ends circling" when its mean absolute yaw rate over its last half exceeds this (rad/s)
+CIRCLING_YAW_RATE = 2.0
 #: the farthest a car drives in a 100-step episode at its 3 m/s top speed (metres)
 MAX_TRAVEL = MAX_SPEED * DT * 100
 NAVIGATION = "sb3_mpail/Navigation-v0"
@@ -195,16 +197,7 @@ def train_job(job: Dict[str, Any], options: Dict[str, Any]) -> Dict[Path, Dict[s
             result.update(final_score=curves[name][-1][1], final_return=curves[name][-1][2],
                           steps_to_target=next((point[0] for point in curves[name] if point[1] >= TARGET), None))  # fmt: skip
         if env_id == NAVIGATION and options["ood_episodes"] > 0:
-            episodes = evaluate_episodes(finals[name], env_id, options["ood_episodes"], OOD_SEED,
-                                         env_kwargs=dict(start_region="ood"), record_observations=True)  # fmt: skip
-            final_rewards = np.array([REWARD_OFFSET - info["distance_to_goal"] for info in episodes.final_infos])
-            result["ood"] = dict(
-                start_poses=[[float(obs[0][0]), float(obs[0][1]), float(obs[0][5])] for obs in episodes.observations],
-                final_positions=[[float(obs[-1][0]), float(obs[-1][1])] for obs in episodes.observations],
-                final_rewards=final_rewards.tolist(),
-                reached=float(np.mean(REWARD_OFFSET - final_rewards <= GOAL_RADIUS)),
-                mean_final_reward=float(final_rewards.mean()),
-            )
+            result["ood"] = ood_record(ood_episodes(finals[name], options["ood_episodes"]))
         results[path] = result
     return results
 
@@ -315,7 +308,8 @@ def mean_ci(values: Sequence[float]) -> Tuple[float, float]:
     return float(values.mean()), float(stats.t.ppf(0.975, len(values) - 1) * values.std(ddof=1) / math.sqrt(len(values)))
 
 
-def _format(mean: float, half_width: float, digits: int = 2) -> str:
+def format_ci(mean: float, half_width: float, digits: int = 2) -> str:
+    """``mean ± half_width`` (just the mean when the half-width is NaN)."""
     return f"{mean:.{digits}f}" + ("" if math.isnan(half_width) else f" ± {half_width:.{digits}f}")
 
 
@@ -351,7 +345,7 @@ def grid_table(results: List[Dict[str, Any]], env_id: str, algos: Sequence[str],
             if not runs:
                 lines.append(f"| {ALGO_LABELS[algo]} | {n_demos} | {done} | not run | not run |")
                 continue
-            score = _format(*mean_ci([run["final_score"] for run in runs]))
+            score = format_ci(*mean_ci([run["final_score"] for run in runs]))
             lines.append(f"| {ALGO_LABELS[algo]} | {n_demos} | {done} | {score} | {steps_summary(runs)} |")
     return "\n".join(lines)
 
@@ -383,12 +377,43 @@ def ood_energy(start_poses: np.ndarray, gaussian: Tuple[np.ndarray, np.ndarray])
     return -0.5 * (mahalanobis + np.log(np.linalg.det(2 * np.pi * covariance)))
 
 
+def ood_episodes(predictor: Any, n_episodes: int, seed: int = OOD_SEED) -> Episodes:
+    """
+    The paper's OOD test of a navigation agent: ``n_episodes`` deterministic 100-step episodes from starts uniform in
+    the 40 x 40 m box with uniform heading (env ``i`` reset with ``seed + i``, the same starts for every agent), with
+    their observations.
+
+    :param predictor: anything SB3's ``predict`` works on
+    :param n_episodes: episodes
+    :param seed: seed of the first start
+    """
+    return evaluate_episodes(predictor, NAVIGATION, n_episodes, seed, env_kwargs=dict(start_region="ood"),
+                             record_observations=True)  # fmt: skip
+
+
+def ood_record(episodes: Episodes) -> Dict[str, Any]:
+    """
+    What a result keeps of :func:`ood_episodes`: per episode the start pose ``(x, y, yaw)``, the final position, the
+    final reward and whether it ends circling, and the share of episodes ending within :data:`GOAL_RADIUS` and
+    their mean final reward.
+    """
+    final_rewards = np.array([REWARD_OFFSET - info["distance_to_goal"] for info in episodes.final_infos])
+    return dict(
+        start_poses=[[float(obs[0][0]), float(obs[0][1]), float(obs[0][5])] for obs in episodes.observations],
+        final_positions=[[float(obs[-1][0]), float(obs[-1][1])] for obs in episodes.observations],
+        final_rewards=final_rewards.tolist(),
+        circling=[bool(np.abs(obs[len(obs) // 2 :, 11]).mean() > CIRCLING_YAW_RATE) for obs in episodes.observations],
+        reached=float(np.mean(REWARD_OFFSET - final_rewards <= GOAL_RADIUS)),
+        mean_final_reward=float(final_rewards.mean()),
+    )
+
+
 def ood_measures(record: Dict[str, Any]) -> Dict[str, float]:
     """
     One run's OOD figures: the fraction of episodes ending within :data:`GOAL_RADIUS` of the goal (all, and among the
     starts any policy can reach: within ``MAX_TRAVEL + GOAL_RADIUS``), the mean final reward and the mean progress
-    ``(start distance - final distance) / start distance``. Records without start poses give only the first and the
-    third.
+    ``(start distance - final distance) / start distance``, and the share of episodes ending in a circle. Records
+    without start poses give only the first and the third.
 
     :param record: a result's ``ood`` entry
     """
@@ -400,6 +425,8 @@ def ood_measures(record: Dict[str, Any]) -> Dict[str, float]:
         reachable = start_distances <= MAX_TRAVEL + GOAL_RADIUS
         measures["reached_reachable"] = float(np.mean(final_distances[reachable] < GOAL_RADIUS))
         measures["progress"] = float(np.mean((start_distances - final_distances) / start_distances))
+    if "circling" in record:
+        measures["circling"] = float(np.mean(record["circling"]))
     return measures
 
 
@@ -425,7 +452,7 @@ def ood_table(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int)
             lines.append(f"| {ALGO_LABELS[algo]} | 0 |" + " not run |" * len(columns))
             continue
         measures = [ood_measures(run["ood"]) for run in runs]
-        cells = [_format(*mean_ci([m[c] for m in measures])) if all(c in m for m in measures) else "–" for c in columns]
+        cells = [format_ci(*mean_ci([m[c] for m in measures])) if all(c in m for m in measures) else "–" for c in columns]
         lines.append(f"| {ALGO_LABELS[algo]} | {len(runs)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
