@@ -21,13 +21,14 @@ from sb3_mpail.mppi.dynamics import (
 )
 from sb3_mpail.mppi.highway_dynamics import HighwayKinematics, RacetrackKinematics  # also registers them by name
 from sb3_mpail.mppi.planner import MPPIPlanner, PlanResult
-from sb3_mpail.mppi.sampling import DeltaSampler, GaussianSampler
+from sb3_mpail.mppi.sampling import ActionSampler, DeltaSampler, GaussianSampler
 
 __all__ = [
     "AngleFeatures",
     "DEFAULT_DYNAMICS",
     "DYNAMICS_MODELS",
     "CallableDynamics",
+    "ActionSampler",
     "DeltaSampler",
     "GaussianSampler",
     "HighwayKinematics",

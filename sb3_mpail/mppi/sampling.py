@@ -10,7 +10,42 @@ from torch import nn
 from sb3_mpail.mppi.native import standard_normal
 
 
-class GaussianSampler(nn.Module):
+class ActionSampler(nn.Module):
+    """
+    What every sampler holds: the action bounds its samples are clamped to, and ``N`` standard normal draws per env,
+    step and action dimension at once (``torch.randn``'s numbers, drawn faster on the CPU).
+
+    :param action_low: lower action bounds, shape ``(action_dim,)``
+    :param action_high: upper action bounds, shape ``(action_dim,)``
+    """
+
+    def __init__(self, action_low: np.ndarray, action_high: np.ndarray):
+        super().__init__()
+        low = th.as_tensor(np.asarray(action_low, dtype=np.float32))
+        high = th.as_tensor(np.asarray(action_high, dtype=np.float32))
+        self.register_buffer("action_low", low)
+        self.register_buffer("action_high", high)
+
+    @property
+    def half_range(self) -> th.Tensor:
+        return (self.action_high - self.action_low) / 2
+
+    def standard_noise(self, plan: th.Tensor, n_samples: int, generator: th.Generator) -> th.Tensor:
+        """Standard normal noise ``(horizon, n_envs, n_samples, action_dim)`` for a plan ``(n_envs, horizon, action_dim)``."""
+        n_envs, horizon, action_dim = plan.shape
+        return standard_normal((horizon, n_envs, n_samples, action_dim), generator, plan.device, plan.dtype)
+
+    def forward(self, plan: th.Tensor, n_samples: int, generator: th.Generator) -> th.Tensor:
+        """
+        :param plan: sampling mean per env, shape ``(n_envs, horizon, action_dim)``
+        :param n_samples: number of sequences ``N`` per env
+        :param generator: source of the noise, so a seed fixes the samples
+        :return: clamped action sequences, time-major, shape ``(horizon, n_envs, n_samples, action_dim)``
+        """
+        raise NotImplementedError
+
+
+class GaussianSampler(ActionSampler):
     """
     Samples action sequences ``a_k ~ N(plan, Sigma)`` independently per env, sample, step and action dimension,
     then clamps them to the action bounds (paper Alg. 2, line "sample action").
@@ -24,26 +59,15 @@ class GaussianSampler(nn.Module):
     """
 
     def __init__(self, action_low: np.ndarray, action_high: np.ndarray, noise_std: Union[float, np.ndarray] = 0.3):
-        super().__init__()
-        low = th.as_tensor(np.asarray(action_low, dtype=np.float32))
-        high = th.as_tensor(np.asarray(action_high, dtype=np.float32))
-        self.register_buffer("action_low", low)
-        self.register_buffer("action_high", high)
-        self.register_buffer("noise_std", th.as_tensor(noise_std, dtype=th.float32) * (high - low) / 2)
+        super().__init__(action_low, action_high)
+        self.register_buffer("noise_std", th.as_tensor(noise_std, dtype=th.float32) * self.half_range)
         # plain numbers when every action dimension shares them: scalar operands are the fastest
         self._uniform_std = _common_value(self.noise_std)
-        self._uniform_bounds = (_common_value(low), _common_value(high))
+        self._uniform_bounds = (_common_value(self.action_low), _common_value(self.action_high))
 
     def forward(self, plan: th.Tensor, n_samples: int, generator: th.Generator) -> th.Tensor:
-        """
-        :param plan: sampling mean per env, shape ``(n_envs, horizon, action_dim)``
-        :param n_samples: number of sequences ``N`` per env
-        :param generator: source of the noise, so a seed fixes the samples
-        :return: clamped action sequences, time-major, shape ``(horizon, n_envs, n_samples, action_dim)``
-        """
-        n_envs, horizon, action_dim = plan.shape
-        # one draw for all envs x samples x steps, independent per env: torch.randn's numbers, drawn faster on the CPU
-        noise = standard_normal((horizon, n_envs, n_samples, action_dim), generator, plan.device, plan.dtype)
+        """See :meth:`ActionSampler.forward`: the plan plus scaled Gaussian noise, clamped."""
+        noise = self.standard_noise(plan, n_samples, generator)
         # in place on the fresh noise tensor: the samples stay contiguous and no second buffer is allocated
         rows, tile = _sample_rows(noise)
         rows.mul_(self.noise_std.repeat(tile) if self._uniform_std is None else self._uniform_std)
@@ -75,7 +99,7 @@ def _common_value(values: th.Tensor) -> Optional[float]:
     return float(values[0]) if bool((values == values[0]).all()) else None
 
 
-class DeltaSampler(nn.Module):
+class DeltaSampler(ActionSampler):
     """
     Samples smooth action sequences by perturbing the plan's *increments* (the authors' default sampler): with ``P``
     the plan and ``D_t = P_t - P_{t-1}`` its increments (``D_0 = 0``), each sample is
@@ -99,28 +123,17 @@ class DeltaSampler(nn.Module):
         noise_std: Union[float, np.ndarray] = (1.0, 0.5),
         max_delta: Union[float, np.ndarray] = 0.2,
     ):
-        super().__init__()
-        low = th.as_tensor(np.asarray(action_low, dtype=np.float32))
-        high = th.as_tensor(np.asarray(action_high, dtype=np.float32))
-        half_range = (high - low) / 2
+        super().__init__(action_low, action_high)
         std = th.as_tensor(np.asarray(noise_std, dtype=np.float32))
         delta = th.as_tensor(np.asarray(max_delta, dtype=np.float32))
         if bool((std < 0).any()) or bool((delta <= 0).any()):
             raise ValueError(f"DeltaSampler needs noise_std >= 0 and max_delta > 0; got {noise_std} and {max_delta}.")
-        self.register_buffer("action_low", low)
-        self.register_buffer("action_high", high)
-        self.register_buffer("noise_std", std * half_range)
-        self.register_buffer("max_delta", delta * half_range)
+        self.register_buffer("noise_std", std * self.half_range)
+        self.register_buffer("max_delta", delta * self.half_range)
 
     def forward(self, plan: th.Tensor, n_samples: int, generator: th.Generator) -> th.Tensor:
-        """
-        :param plan: sampling mean per env, shape ``(n_envs, horizon, action_dim)``
-        :param n_samples: number of sequences ``N`` per env
-        :param generator: source of the noise, so a seed fixes the samples
-        :return: clamped action sequences, time-major, shape ``(horizon, n_envs, n_samples, action_dim)``
-        """
-        n_envs, horizon, action_dim = plan.shape
-        noise = standard_normal((horizon, n_envs, n_samples, action_dim), generator, plan.device, plan.dtype)
+        """See :meth:`ActionSampler.forward`: clamped random walks of perturbed increments from the plan's start."""
+        noise = self.standard_noise(plan, n_samples, generator)
         increments = th.diff(plan.transpose(0, 1), dim=0, prepend=plan[:, :1].transpose(0, 1)).unsqueeze(2)
         steps = th.clamp(noise.mul_(self.noise_std).add_(increments), -self.max_delta, self.max_delta)
         samples = th.cumsum(steps, dim=0).add_(plan[:, 0].unsqueeze(1))
