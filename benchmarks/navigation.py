@@ -25,6 +25,7 @@ import numpy as np
 import torch as th
 
 from benchmarks.report import machine_description, write_section
+from sb3_mpail.train_navigation import DEFAULT_DEMOS
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 FIGURES = REPO_ROOT / "benchmarks" / "figures"
@@ -180,7 +181,7 @@ def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--demos", default="navigation_4", help="a shipped demo set's name or a demo file")
+    parser.add_argument("--demos", default=DEFAULT_DEMOS, help="a shipped demo set's name or a demo file")
     parser.add_argument("--timesteps", type=int, default=None, help="default: the main command's")
     parser.add_argument("--eval-freq", type=int, default=10000)
     parser.add_argument("--n-eval-episodes", type=int, default=10, help="episodes per learning-curve point")

@@ -123,7 +123,8 @@ VARIANTS: Dict[str, Variant] = {
     "defaults": Variant("the main command's defaults"),
     "stopping-demos": Variant("demos of an expert that stops on the goal (navigation_4)", demos="navigation_4"),
     "gaussian-sampler": Variant(
-        "Gaussian sampling (the paper's) instead of delta sampling", lambda: dict(sampler="gaussian", noise_std=0.3)
+        "Gaussian sampling (the paper's) instead of delta sampling",
+        lambda: dict(sampler="gaussian", noise_std=0.3, sampler_kwargs=None),
     ),
     "raw-heading": Variant("the discriminator sees the raw wrapped yaw", lambda: dict(discriminator_features=None)),
     "heading-for-the-value-too": Variant(
@@ -277,6 +278,7 @@ def main() -> None:
             futures = [pool.submit(run_variant, name, seed, args.results_dir) for name, seed in jobs]
             for future in futures:
                 print("wrote", future.result(), flush=True)
+    th.set_num_threads(1)  # the runs' setting, quoted in the report
     names = [name for name in VARIANTS if name in args.variants or any(Path(args.results_dir).glob(f"{name}_seed*.json"))]
     seeds = " ".join(map(str, args.seeds))
     command = f"python -m benchmarks.navigation_ablations --seeds {seeds}"

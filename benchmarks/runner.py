@@ -683,7 +683,8 @@ def write_report(
         budgets = {algo: sorted({r["n_timesteps"] for r in results if r["algo"] == algo}) for algo in grid_algos}
         figures = [plot_curves(results, env_id, n, figures_dir / f"baselines_{name}_{n}demos.png") for n in grid_demos]
         lines = [
-            f"## Baselines on {env_id}" + ("" if demo_set == env_name_of(env_id) else f", demos {demo_set}_<n>"),
+            f"## Baselines on {env_id}" + ("" if demo_set == env_name_of(env_id) else f", demos {demo_set}_<n>")
+            + ("" if timesteps is None else f" ({timesteps} env steps)"),
             "",
             f"Normalised score = (R - random) / (expert - random), random {stats['random_return_mean']:.1f}, expert "
             f"{stats['expert_return_mean']:.1f} ({stats['expert_algo']}); final deterministic evaluation on "
@@ -707,7 +708,7 @@ def write_report(
         lines += [""] + [f"![{env_id}](benchmarks/figures/{figure.name})" for figure in figures if figure is not None]
         lines += ["", f"Command: `{command}` on {machine_description()}."]
         write_section(f"baselines-{name}", "\n".join(lines), report_file)
-        if env_id == NAVIGATION:
+        if env_id == NAVIGATION and any("ood" in r for r in results):
             n_ood = 4 if 4 in grid_demos else grid_demos[0]
             gaussian = expert_pose_gaussian(demo_set, n_ood)
             figure = plot_ood(results, grid_algos, n_ood, figures_dir / f"baselines_{name}_ood.png", gaussian)

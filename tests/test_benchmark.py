@@ -140,3 +140,16 @@ def test_curve_points_average_exactly_one_episode_per_seed():
     _, score, mean_return = runner.curve_point(PushRight(), "sb3_mpail/ContinuousCartPole-v0", 7, 4, stats)
     assert len(set(lengths)) > 1 and mean_return == pytest.approx(np.mean(lengths))
     assert score == pytest.approx(normalised_score(mean_return, stats))
+
+
+def test_ood_measures_count_only_reachable_starts_and_progress_relative_to_the_start_distance():
+    offset = runner.REWARD_OFFSET
+    # starts 10 m, 20 m and 40 m (unreachable in 100 steps) from the goal; final distances 1, 10 and 1 m
+    starts = [[0.0, 10.0, 0.0], [10.0, -10.0, 1.0], [10.0, -30.0, 2.0]]
+    record = dict(start_poses=starts, final_rewards=[offset - 1.0, offset - 10.0, offset - 1.0], circling=[False, True, False])
+    measures = runner.ood_measures(record)
+    assert measures["reached"] == pytest.approx(2 / 3)
+    assert measures["reached_reachable"] == pytest.approx(1 / 2)
+    assert measures["progress"] == pytest.approx(np.mean([9 / 10, 10 / 20, 39 / 40]))
+    assert measures["final_reward"] == pytest.approx(offset - 4.0)
+    assert measures["circling"] == pytest.approx(1 / 3)

@@ -128,7 +128,7 @@ def test_the_installed_wheel_trains_on_shipped_demos_saves_loads_and_scores(inst
     site, workdir = installed
     report = json.loads(run([sys.executable, "-c", USER_SCRIPT], workdir, site).stdout.strip().splitlines()[-1])
     assert Path(report["package"]).resolve().is_relative_to(site.resolve())
-    assert {"pendulum_4", "navigation_4"} <= set(report["shipped"])
+    assert {"pendulum_4", "navigation_4", "navigation_circling_4"} <= set(report["shipped"])
     assert report["steps"] == 32 and len(report["action"][0]) == 1
     assert isinstance(report["score"], float)
 
@@ -155,7 +155,7 @@ def test_the_console_scripts_run_the_main_command_and_the_zoo_with_their_default
     scripts = site / "bin"
     run([str(scripts / "sb3-mpail-train-navigation"), *TINY_NAVIGATION, "--out-dir", "navigation"], workdir, site)
     results = json.loads((workdir / "navigation" / "results.json").read_text())
-    assert results["demos"] == "navigation_4" and results["timesteps"] == 200
+    assert results["demos"] == "navigation_circling_4" and results["timesteps"] == 200
     assert (workdir / "navigation" / "model.zip").is_file() and (workdir / "navigation" / "navigation.png").is_file()
     # no -conf: the shipped hyperparameters and their shipped demos
     trained = run([str(scripts / "sb3-mpail-zoo"), "train", "--algo", "mpail", "--env", "Pendulum-v1", "-n", "64", "-f",
