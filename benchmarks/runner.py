@@ -397,15 +397,14 @@ def ood_record(episodes: Episodes) -> Dict[str, Any]:
     final reward and whether it ends circling, and the share of episodes ending within :data:`GOAL_RADIUS` and
     their mean final reward.
     """
-    final_rewards = np.array([REWARD_OFFSET - info["distance_to_goal"] for info in episodes.final_infos])
-    return dict(
+    record = dict(
         start_poses=[[float(obs[0][0]), float(obs[0][1]), float(obs[0][5])] for obs in episodes.observations],
         final_positions=[[float(obs[-1][0]), float(obs[-1][1])] for obs in episodes.observations],
-        final_rewards=final_rewards.tolist(),
+        final_rewards=[REWARD_OFFSET - info["distance_to_goal"] for info in episodes.final_infos],
         circling=[bool(np.abs(obs[len(obs) // 2 :, 11]).mean() > CIRCLING_YAW_RATE) for obs in episodes.observations],
-        reached=float(np.mean(REWARD_OFFSET - final_rewards <= GOAL_RADIUS)),
-        mean_final_reward=float(final_rewards.mean()),
     )
+    measures = ood_measures(record)  # one definition of reaching the goal
+    return dict(record, reached=measures["reached"], mean_final_reward=measures["final_reward"])
 
 
 def ood_measures(record: Dict[str, Any]) -> Dict[str, float]:
