@@ -41,6 +41,11 @@ BETAS = Rule(
 HIDDEN_SIZES = Rule(
     "a sequence of positive integers", lambda value: _is_sequence(value) and all(map(POSITIVE_INTEGER.holds, value))
 )
+#: a flag: Python's or numpy's booleans, never a string such as ``"no"`` (which Python reads as true)
+BOOLEAN = Rule("True or False", lambda value: isinstance(value, (bool, np.bool_)))
+#: an env-step budget: whole numbers, also as floats (``learn(1e6)``), never strings, NaN or negatives
+TIMESTEPS = Rule("a whole number >= 0", lambda value: _is_number(value) and value >= 0 and float(value).is_integer())
+OPTIONAL_POSITIVE_INTEGER = Rule("a positive integer or None", lambda value: value is None or POSITIVE_INTEGER.holds(value))
 OPTIONAL_DICT = Rule("a dict or None", lambda value: value is None or isinstance(value, Mapping))
 
 

@@ -22,6 +22,7 @@ import json
 import os
 import re
 import sys
+import warnings
 import zipfile
 import zlib
 from pathlib import Path
@@ -42,6 +43,10 @@ SHIPPED_DEMO_DIR = Path(__file__).resolve().parent / "data"
 _DEMO_SET_NAME = re.compile(r"^(?P<family>.+)_(?P<n_demos>\d+)$")
 #: a Minari dataset id as Minari writes them: namespaces, a name and its version, e.g. ``"navigation/expert-v0"``
 _MINARI_ID = re.compile(r"^(?:[-\w]+/)*[-\w]+-v\d+$")
+#: the dtype kinds demos may hold: booleans, integers and floats
+_NUMERIC_KINDS = "biuf"
+#: demo values of larger magnitude are warned of: the discriminator's loss explodes on them
+HUGE_DEMO_VALUE = 1e6
 
 
 class ExpertTransitions(NamedTuple):
@@ -57,28 +62,60 @@ def _pairs_from_episodes(episodes: Sequence[np.ndarray]) -> ExpertTransitions:
     )
 
 
+def _check_numeric(dtype: np.dtype, what: str) -> None:
+    """
+    Refuses observations that are not real numbers (strings, Python objects, complex numbers), naming their dtype.
+
+    :param dtype: the observations' dtype
+    :param what: what holds them, as the message names it (e.g. ``"Demo file demos/pendulum_4.npz: obs"``)
+    :raises ValueError: the dtype is not boolean, integer or floating
+    """
+    if dtype.kind == "c":
+        raise ValueError(
+            f"{what} has complex dtype {dtype}, but demos must be numeric observations of real numbers: converting them "
+            "to float32 would drop their imaginary parts. Store real values (e.g. the real and imaginary parts as "
+            "separate observation dimensions, as the environment returns them)."
+        )
+    if dtype.kind not in _NUMERIC_KINDS:
+        raise ValueError(
+            f"{what} has dtype {dtype}, but demos must be numeric observations (floats or integers): check that the demos "
+            "hold the recorded observations, and store them as numbers (e.g. array.astype(np.float32))."
+        )
+
+
 def _checked_episodes(episodes: Sequence[np.ndarray], source: str) -> List[np.ndarray]:
     """
-    The episodes as float32 arrays, refusing none at all and episodes of fewer than two observations.
+    The episodes as float32 arrays, refusing none at all, non-numeric observations, episodes of fewer than two
+    observations and episodes whose observations differ in size.
 
     :param episodes: observation arrays, ``(T_i + 1, obs_dim)`` each
     :param source: where they come from, as error messages name it (e.g. ``"Demo file demos/pendulum_4.npz"``)
     """
     if len(episodes) == 0:
         raise ValueError(f"{source} holds no episodes: expert demos need at least one episode of two or more observations.")
-    episodes = [np.asarray(episode, dtype=np.float32) for episode in episodes]
+    episodes = [np.asarray(episode) for episode in episodes]
+    episodes_by_size: Dict[int, List[int]] = {}
     for index, episode in enumerate(episodes):
+        _check_numeric(episode.dtype, f"{source}: episode {index}")
         if episode.ndim != 2 or len(episode) < 2:
             raise ValueError(
                 f"{source}: episode {index} must hold at least two observations as a (T + 1, obs_dim) array; "
                 f"got shape {episode.shape}."
             )
-    return episodes
+        episodes_by_size.setdefault(episode.shape[1], []).append(index)
+    if len(episodes_by_size) > 1:
+        sizes = "; ".join(f"obs_dim {size} in episodes {indices}" for size, indices in episodes_by_size.items())
+        raise ValueError(
+            f"{source}: the episodes' observations differ in size ({sizes}). Every episode must come from the same "
+            "environment, with the same observation space: drop the episodes recorded from another one."
+        )
+    return [episode.astype(np.float32) for episode in episodes]
 
 
 def _read_npz(path: Path) -> Dict[str, np.ndarray]:
     """
-    The arrays of an ``.npz`` demo file, refusing a file numpy cannot read as one with its name and the problem.
+    The arrays of an ``.npz`` demo file, refusing a file numpy cannot read as one with its name and the problem, and
+    arrays of Python objects (which numpy loads only by unpickling) as not numeric.
 
     :param path: an existing file
     """
@@ -91,6 +128,8 @@ def _read_npz(path: Path) -> Dict[str, np.ndarray]:
             with data:
                 arrays = {name: data[name] for name in data.files}
     except (OSError, EOFError, ValueError, zipfile.BadZipFile, zlib.error) as error:
+        if "Object arrays cannot be loaded" in str(error):  # Python objects, which numpy loads only by unpickling
+            _check_numeric(np.dtype(object), f"Demo file {path}: one of its arrays")
         raise ValueError(
             f"Demo file {path} is not a readable .npz archive (truncated, or not written by numpy.savez): {error}"
         ) from error
@@ -104,6 +143,7 @@ def _episodes_from_npz(path: Path) -> List[np.ndarray]:
     if "obs" not in data:
         raise ValueError(f"Demo file {path} has no 'obs' array (it has {sorted(data)}).")
     observations = data["obs"]
+    _check_numeric(observations.dtype, f"Demo file {path}: obs")
     if "episode_lengths" in data:
         if observations.ndim != 2:
             raise ValueError(f"Demo file {path}: with episode_lengths, obs must be 2-D; got shape {observations.shape}.")
@@ -238,7 +278,8 @@ def load_demo_episodes(demos: DemoSource) -> List[np.ndarray]:
         that id
     :raises ImportError: a Minari id is given and minari is not installed
     :raises ValueError: the file cannot be read, or there are no episodes, or an episode has fewer than two
-        observations, or a Minari dataset's observations are not a ``Box``
+        observations, or observations are not real numbers or differ in size between episodes, or a Minari dataset's
+        observations are not a ``Box``
     """
     if _is_minari_dataset(demos):
         return _minari_episodes(demos)
@@ -271,7 +312,8 @@ def load_demos(
     demos: DemoSource, observation_space: spaces.Box, space_name: str = "the environment's observation space"
 ) -> ExpertTransitions:
     """
-    Reads expert observations and checks them against the environment's observation space.
+    Reads expert observations and checks them against the environment's observation space, warning of values that
+    hint at demos of another environment (:func:`check_demos_fit_space`).
 
     :param demos: trajectories, transitions, an ``.npz`` path, an imitation ``serialize`` directory, the name of a
         shipped demo set (:func:`list_shipped_demos`), a ``minari.MinariDataset`` or a local Minari dataset's id
@@ -282,9 +324,12 @@ def load_demos(
     :raises FileNotFoundError: the path does not exist, no shipped demo set has that name and no local Minari dataset
         that id
     :raises ImportError: a Minari id is given and minari is not installed
-    :raises ValueError: shapes differ from the observation space, values are not finite, or the data is empty
+    :raises ValueError: shapes differ from the observation space or between episodes, values are not finite or not
+        real numbers, or the data is empty
     """
     if isinstance(demos, Transitions):
+        for name in ("obs", "next_obs"):
+            _check_numeric(np.asarray(getattr(demos, name)).dtype, f"The demo transitions' {name}")
         transitions = ExpertTransitions(np.asarray(demos.obs, np.float32), np.asarray(demos.next_obs, np.float32))
     else:
         transitions = _pairs_from_episodes(load_demo_episodes(demos))
@@ -299,5 +344,43 @@ def load_demos(
         if not np.all(np.isfinite(array)):
             rows = np.unique(np.nonzero(~np.isfinite(array))[0])
             raise ValueError(f"Demo {name} contain NaN or infinite values (in {len(rows)} transitions, first at {rows[0]}).")
+    check_demos_fit_space(transitions, observation_space, space_name)
     return transitions
 
+
+def check_demos_fit_space(
+    transitions: ExpertTransitions, observation_space: spaces.Box, space_name: str = "the environment's observation space"
+) -> None:
+    """
+    Warns of demo values that hint the demos do not belong to the environment (or are in other units): values outside
+    the space's finite bounds, and values of a magnitude above :data:`HUGE_DEMO_VALUE`.
+
+    :param transitions: finite expert ``(s, s')`` pairs of the space's shape
+    :param observation_space: the space the demos must lie in
+    :param space_name: how warnings name that space
+    """
+    values = np.concatenate(transitions).reshape(2 * len(transitions.observations), -1)
+    # the bounds as float32, as the demos are, so that a value on a float64 bound is not pushed past it by rounding
+    low, high = (bound.astype(np.float32).reshape(-1) for bound in (observation_space.low, observation_space.high))
+    outside = (values < low) | (values > high)
+    if outside.any():
+        dimensions = np.flatnonzero(outside.any(axis=0))
+        first = dimensions[0]
+        warnings.warn(
+            f"{np.count_nonzero(outside)} of the {outside.size} values in the demos' (s, s') pairs lie outside "
+            f"{space_name}, in dimensions {dimensions.tolist()}: e.g. dimension {first} is bounded to "
+            f"[{low[first]:g}, {high[first]:g}] but the demos range over [{values[:, first].min():g}, "
+            f"{values[:, first].max():g}]. The demos may have been recorded in another environment, or in other units: "
+            "check that they match this one.",
+            UserWarning,
+            stacklevel=3,
+        )
+    huge = np.abs(values) > HUGE_DEMO_VALUE
+    if huge.any():
+        warnings.warn(
+            f"{np.count_nonzero(huge)} of the values in the demos' (s, s') pairs exceed {HUGE_DEMO_VALUE:g} in magnitude "
+            f"(up to {np.abs(values).max():g}): such values make the discriminator's loss explode (to 4.6e24 on demos "
+            "of 1e30). Check the demos' units, and that they were recorded in this environment.",
+            UserWarning,
+            stacklevel=3,
+        )

@@ -1,5 +1,6 @@
 """Model Predictive Adversarial Imitation Learning (Han et al., ICLR 2026) as a Stable-Baselines3 algorithm."""
 
+import inspect
 import io
 import json
 import math
@@ -26,13 +27,16 @@ from torch.nn import functional as F
 from sb3_mpail.buffers import TransitionRolloutBuffer
 from sb3_mpail.checks import (
     BETAS,
+    BOOLEAN,
     FRACTION,
     NON_NEGATIVE_INTEGER,
     NON_NEGATIVE_NUMBER,
     OPTIONAL_DICT,
+    OPTIONAL_POSITIVE_INTEGER,
     POSITIVE_INTEGER,
     POSITIVE_NUMBER,
     SEED,
+    TIMESTEPS,
     UNIT_INTERVAL,
     check_arguments,
     check_finite,
@@ -45,6 +49,9 @@ from sb3_mpail.policies import NON_FINITE_OBSERVATION, NON_FINITE_PLAN, MlpMPPI,
 SelfMPAIL = TypeVar("SelfMPAIL", bound="MPAIL")
 #: settings every MPAIL model file holds and other algorithms' files do not
 MPAIL_SETTINGS = ("discriminator_learning_rate", "initial_temperature", "episodes_completed")
+
+#: constructor settings that Stable-Baselines3's ``load`` must set under another attribute name
+_SETTING_ATTRIBUTES = {"temperature": "temperature_mode", "stats_window_size": "_stats_window_size"}
 
 #: how the MPPI temperature can move (:class:`MPAIL`'s ``temperature``)
 TEMPERATURES = ("decay", "learned")
@@ -190,6 +197,7 @@ class MPAIL(BaseAlgorithm):
     def _check_settings(self) -> None:
         """Refuses settings that would train or plan nonsense, naming each (at construction, and after ``load``'s)."""
         check_arguments(
+            demos_are_features=(self.demos_are_features, BOOLEAN),
             n_steps=(self.n_steps, POSITIVE_INTEGER),
             gamma=(self.gamma, UNIT_INTERVAL),
             gae_lambda=(self.gae_lambda, UNIT_INTERVAL),
@@ -334,9 +342,22 @@ class MPAIL(BaseAlgorithm):
         :raises ValueError: the file is empty, truncated, damaged or not a zip archive, or it is not an MPAIL model
         """
         _check_model_file(path)
-        model = super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
+        model = super().load(path, env, device, custom_objects, print_system_info, force_reset, **cls._load_settings(kwargs))
         model._check_settings()
         return model
+
+    @classmethod
+    def _load_settings(cls, settings: Dict[str, Any]) -> Dict[str, Any]:
+        """
+        ``load``'s settings as the attributes Stable-Baselines3 sets, refusing names that are no setting (which SB3
+        would store as attributes nothing reads, e.g. a typo).
+        """
+        not_settings = {"self", "policy", "env", "demos", "device", "_init_setup_model"}
+        known = set(inspect.signature(cls.__init__).parameters) - not_settings
+        unknown = sorted(set(settings) - known)
+        if unknown:
+            raise ValueError(f"MPAIL.load got settings that MPAIL does not have: {unknown}; its settings are {sorted(known)}.")
+        return {_SETTING_ATTRIBUTES.get(name, name): value for name, value in settings.items()}
 
     def save(
         self,
@@ -345,8 +366,12 @@ class MPAIL(BaseAlgorithm):
         include: Iterable[str] | None = None,
     ) -> None:
         """
-        Saves the model (demos excluded). The file is written beside its destination and then renamed over it, so
-        a crash while saving never leaves a truncated checkpoint behind.
+        Saves the model (demos excluded). The file is written beside its destination as ``<name>.partial`` and then
+        renamed over it, so a crash while saving never leaves a truncated checkpoint behind; a ``.partial`` left by a
+        killed process is overwritten and removed by the next save. As Stable-Baselines3's ``save`` does, a symbolic
+        link is followed (its target is written) and a read-only file is refused.
+
+        :raises PermissionError: the destination is a read-only file
         """
         if isinstance(path, io.BufferedIOBase):
             super().save(path, exclude, include)
@@ -354,6 +379,9 @@ class MPAIL(BaseAlgorithm):
         destination = pathlib.Path(path)
         if destination.suffix == "":
             destination = destination.with_name(destination.name + ".zip")
+        destination = destination.resolve()  # through symbolic links, to the file they name
+        if destination.exists() and not destination.stat().st_mode & 0o222:  # by mode, as root too
+            raise PermissionError(f"{destination} is read-only: MPAIL.save does not overwrite it (chmod u+w to allow).")
         destination.parent.mkdir(parents=True, exist_ok=True)
         partial = destination.with_name(destination.name + ".partial")
         try:
@@ -376,13 +404,21 @@ class MPAIL(BaseAlgorithm):
         the budget, so ``num_timesteps`` ends at ``total_timesteps`` when it is a multiple of ``n_envs``. Such a
         shorter rollout trains the value (and a learned model) but not the discriminator.
         """
+        check_arguments(
+            total_timesteps=(total_timesteps, TIMESTEPS), log_interval=(log_interval, OPTIONAL_POSITIVE_INTEGER)
+        )
+        total_timesteps = int(total_timesteps)
+        if self.env is None:
+            raise ValueError(
+                "MPAIL has no environment to learn in (a model loaded without one plans only): pass env= to "
+                "MPAIL.load(path, env=...) or call model.set_env(env)."
+            )
         if self.expert is None:
             raise ValueError("MPAIL needs expert demos to learn: pass demos=... to MPAIL(...) or call model.set_demos(demos).")
         total_timesteps, callback = self._setup_learn(
             total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
         )
         callback.on_training_start(locals(), globals())
-        assert self.env is not None
         while self.num_timesteps < total_timesteps:
             n_rollout_steps = min(self.n_steps, math.ceil((total_timesteps - self.num_timesteps) / self.env.num_envs))
             if not self.collect_rollouts(self.env, callback, n_rollout_steps):

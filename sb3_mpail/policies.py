@@ -9,6 +9,7 @@ from stable_baselines3.common.policies import BasePolicy
 from torch import nn
 
 from sb3_mpail.checks import (
+    BOOLEAN,
     HIDDEN_SIZES,
     NON_NEGATIVE_NUMBER,
     OPTIONAL_DICT,
@@ -29,10 +30,13 @@ from sb3_mpail.mppi.dynamics import DynamicsSpec, LearnedDynamics, make_dynamics
 from sb3_mpail.mppi.planner import MPPIPlanner, weighted_action_std
 from sb3_mpail.mppi.sampling import make_sampler
 
-#: the deterministic-planning noise stream is seeded with ``seed + DETERMINISTIC_SEED_OFFSET``
-DETERMINISTIC_SEED_OFFSET = 1_000_003
+#: deterministic planning draws its sampling noise afresh from this seed at every call, so its actions are a pure
+#: function of the inputs (and the model), whatever was planned before and whatever the model's seed
+DETERMINISTIC_PLANNING_SEED = 1_000_003
 #: what the errors on a non-finite observation and on a non-finite plan advise
 NON_FINITE_OBSERVATION = "the planner cannot plan from it. Check the environment (SB3's VecCheckNan wrapper finds the step)."
+#: observations beyond this magnitude are refused: float32 products of two such values overflow
+LARGE_OBSERVATION = 1e18
 NON_FINITE_PLAN = (
     "the step cost, value or dynamics model returned NaN or infinite values (e.g. training diverged, or a learned "
     "model met states far outside its data)."
@@ -109,7 +113,18 @@ class MPPIPolicy(BasePolicy):
         super().__init__(observation_space, action_space)
         if not isinstance(observation_space, spaces.Box) or len(observation_space.shape) != 1:
             raise ValueError(f"MPPI policies plan on flat Box observations; got {observation_space}.")
+        if not isinstance(action_space, spaces.Box) or len(action_space.shape) != 1:
+            raise ValueError(f"MPPI policies plan continuous actions (a flat gymnasium.spaces.Box); got {action_space}.")
+        if not (np.isfinite(action_space.low).all() and np.isfinite(action_space.high).all()):
+            raise ValueError(
+                "MPPI samples actions relative to the action space's range, so its bounds must be finite; got "
+                f"low={action_space.low}, high={action_space.high}. Give the env's action space the limits its actuators "
+                "have (e.g. through a gymnasium.ActionWrapper)."
+            )
         check_arguments(
+            use_step_cost=(use_step_cost, BOOLEAN),
+            use_terminal_value=(use_terminal_value, BOOLEAN),
+            use_spectral_norm=(use_spectral_norm, BOOLEAN),
             dynamics_kwargs=(dynamics_kwargs, OPTIONAL_DICT),
             noise_std=(noise_std, per_action_dimension(NON_NEGATIVE_NUMBER, action_space.shape[0])),
             discriminator_hidden_sizes=(discriminator_hidden_sizes, HIDDEN_SIZES),
@@ -140,15 +155,15 @@ class MPPIPolicy(BasePolicy):
         self.discriminator_features: nn.Module | None = None
         self.feature_space = observation_space
         if discriminator_features is not None:
-            self.discriminator_features = FeatureMap.wrap(discriminator_features)
-            self.feature_space = FeatureMap.space(self.discriminator_features, observation_space)
+            self.discriminator_features = FeatureMap.wrap(discriminator_features, "discriminator_features")
+            self.feature_space = FeatureMap.space(self.discriminator_features, observation_space, "discriminator_features")
         self.discriminator = make_transition_discriminator(
             self.feature_space, action_space, discriminator_hidden_sizes, use_spectral_norm
         )
         self.value_net = make_value_network(observation_space.shape[0], value_hidden_sizes)
         if value_features is not None:
-            mapped = FeatureMap.wrap(value_features).requires_grad_(False)  # a fixed map: the value optimiser leaves it
-            value_inputs = FeatureMap.space(mapped, observation_space).shape[0]
+            mapped = FeatureMap.wrap(value_features, "value_features").requires_grad_(False)  # fixed: not optimised
+            value_inputs = FeatureMap.space(mapped, observation_space, "value_features").shape[0]
             self.value_net = MappedNetwork(mapped, make_value_network(value_inputs, value_hidden_sizes))
         self.dynamics = make_dynamics(dynamics, observation_space, action_space, dynamics_kwargs)
         low, high = action_space.low.astype(np.float32), action_space.high.astype(np.float32)
@@ -171,7 +186,7 @@ class MPPIPolicy(BasePolicy):
         self.register_buffer("action_low", th.as_tensor(low))
         self.register_buffer("action_high", th.as_tensor(high))
         self._seed: int | None = None
-        self._generators: Dict[bool, th.Generator] = {}
+        self._generator: th.Generator | None = None
 
     def _get_constructor_parameters(self) -> Dict[str, Any]:
         return {**super()._get_constructor_parameters(), **self._constructor_kwargs}
@@ -186,25 +201,28 @@ class MPPIPolicy(BasePolicy):
         model, its replay buffer and minibatch order (the same seed gives the same fitted model).
         """
         self._seed = seed
-        self._generators = {}
+        self._generator = None
         if isinstance(self.dynamics, LearnedDynamics):
             self.dynamics.seed(seed)
 
     def generator(self, deterministic: bool = False) -> th.Generator:
         """
         The planner's noise source, on the policy's device (re-created, re-seeded, if the policy moved). Deterministic
-        planning (evaluation, deployment) has a stream of its own, so evaluating during training leaves the training
-        samples, and with them the learning curve, unchanged.
+        planning (evaluation, deployment) gets a new generator seeded with :data:`DETERMINISTIC_PLANNING_SEED` at every
+        call: the same observation, plan and model give the same action, from any thread and after any history, and
+        evaluating during training leaves the training samples, and with them the learning curve, unchanged.
 
-        :param deterministic: the stream of deterministic planning rather than of training
+        :param deterministic: the noise of deterministic planning rather than the training stream
         """
-        generator = self._generators.get(deterministic)
+        if deterministic:
+            return th.Generator(device=self.device).manual_seed(DETERMINISTIC_PLANNING_SEED)
+        generator = self._generator
         if generator is None or generator.device != self.device:
-            generator = self._generators[deterministic] = th.Generator(device=self.device)
+            generator = self._generator = th.Generator(device=self.device)
             if self._seed is None:
                 generator.seed()
             else:
-                generator.manual_seed(self._seed + DETERMINISTIC_SEED_OFFSET if deterministic else self._seed)
+                generator.manual_seed(self._seed)
         return generator
 
     def initial_plan(self, n_envs: int) -> th.Tensor:
@@ -271,24 +289,22 @@ class MPPIPolicy(BasePolicy):
         self.set_training_mode(False)
         observations, vectorized = self.obs_to_tensor(observation)
         n_envs = observations.shape[0]
-        check_finite(np.asarray(observation).reshape(n_envs, -1), "The observation passed to predict", NON_FINITE_OBSERVATION)
+        fresh = self.initial_plan(n_envs)
+        if n_envs == 0:  # an empty batch: no actions, no plans
+            return np.zeros((0, *self.action_space.shape), np.float32), fresh.cpu().numpy()
+        raw = np.asarray(observation).reshape(n_envs, -1)
+        check_finite(raw, "The observation passed to predict", NON_FINITE_OBSERVATION)
+        huge = np.flatnonzero((np.abs(raw) > LARGE_OBSERVATION).any(axis=1))
+        if len(huge) > 0:
+            raise ValueError(
+                f"The observation passed to predict holds values beyond +-{LARGE_OBSERVATION:g} for envs {huge.tolist()} "
+                f"(env {huge[0]}: {raw[huge[0]]}): the planner computes in float32, where products of such values "
+                "overflow. Check the environment's units, or scale its observations."
+            )
         with th.no_grad():
-            fresh = self.initial_plan(n_envs)
-            if state is None:
-                plan = fresh
-            else:
-                state = np.asarray(state)
-                plan = th.as_tensor(state, dtype=th.float32, device=self.device)
-                if plan.shape != fresh.shape:
-                    raise ValueError(
-                        f"state must be the plans returned by predict, shape {tuple(fresh.shape)}; got {tuple(plan.shape)}."
-                    )
-                check_finite(
-                    state, "The state passed to predict", "pass back the plans predict returned, or None to start afresh."
-                )
-                if episode_start is not None:
-                    restart = th.as_tensor(np.asarray(episode_start, dtype=bool).reshape(n_envs, 1, 1), device=self.device)
-                    plan = th.where(restart, fresh, plan)
+            plan = fresh if state is None else self._previous_plan(state, fresh)
+            if episode_start is not None:
+                plan = th.where(self._episode_starts(episode_start, n_envs, vectorized), fresh, plan)
             actions, plan = self.act(observations, plan, deterministic)
         actions, plan = actions.cpu().numpy(), plan.cpu().numpy()
         check_finite(plan, "The plan made from a finite observation and state", NON_FINITE_PLAN)
@@ -296,5 +312,26 @@ class MPPIPolicy(BasePolicy):
             actions = actions.squeeze(axis=0)
         return actions, plan
 
+    def _previous_plan(self, state: np.ndarray, fresh: th.Tensor) -> th.Tensor:
+        """``predict``'s ``state``, checked to be plans of the right shape and finite, as a tensor."""
+        state = np.asarray(state)
+        if state.shape != tuple(fresh.shape) or not np.issubdtype(state.dtype, np.number):
+            raise ValueError(
+                f"state must be the plans returned by predict, numbers of shape {tuple(fresh.shape)}; got "
+                f"{state.dtype} of shape {state.shape}."
+            )
+        check_finite(state, "The state passed to predict", "pass back the plans predict returned, or None to start afresh.")
+        return th.as_tensor(state, dtype=th.float32, device=self.device)
+
+    def _episode_starts(self, episode_start: np.ndarray, n_envs: int, vectorized: bool) -> th.Tensor:
+        """``predict``'s ``episode_start``: one flag per env (a single flag for a single observation)."""
+        starts = np.asarray(episode_start)
+        numeric = starts.dtype == bool or np.issubdtype(starts.dtype, np.number)
+        if not numeric or starts.size != n_envs or (vectorized and starts.ndim != 1):
+            raise ValueError(
+                f"episode_start must hold one flag per env ({n_envs}, shape ({n_envs},)); got {starts.dtype} of shape "
+                f"{starts.shape}: {starts!r}."
+            )
+        return th.as_tensor(starts.astype(bool).reshape(n_envs, 1, 1), device=self.device)
 
 MlpMPPI = MPPIPolicy

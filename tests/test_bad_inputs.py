@@ -353,3 +353,138 @@ def test_an_env_with_normalised_rewards_only_is_accepted(demos):
     env = VecNormalize(make_vec_env("Pendulum-v1", n_envs=1), norm_obs=False)
     model = MPAIL("MlpMPPI", env, demos, n_steps=8, policy_kwargs=TINY_PLANNER).learn(8)
     assert model.num_timesteps == 8
+
+
+# --- predict's other inputs
+
+
+@pytest.mark.parametrize("episode_start", [np.zeros(2, bool), np.zeros((3, 1), bool), True, ["yes", "no", "no"]])
+def test_predict_refuses_an_episode_start_that_is_not_one_flag_per_env(model, episode_start):
+    observations = np.zeros((3, 3), np.float32)
+    _, plans = model.predict(observations)
+    with pytest.raises(ValueError, match=r"episode_start must hold one flag per env \(3, shape \(3,\)\); got"):
+        model.predict(observations, state=plans, episode_start=episode_start)
+    with pytest.raises(ValueError, match="episode_start must hold one flag per env"):  # also without a state
+        model.predict(observations, episode_start=episode_start)
+
+
+def test_predict_takes_a_single_flag_as_episode_start_of_a_single_observation(model):
+    observation = np.zeros(3, np.float32)
+    _, plan = model.predict(observation)
+    fresh = model.predict(observation, state=plan, episode_start=True, deterministic=True)[0]
+    np.testing.assert_array_equal(fresh, model.predict(observation, deterministic=True)[0])
+
+
+@pytest.mark.parametrize("huge", [1e30, 1e39])
+def test_predict_refuses_observations_too_large_for_float32_planning_naming_the_env(model, huge):
+    observations = np.array([[1.0, 0.0, 0.5], [1.0, 0.0, huge]])
+    with pytest.raises(ValueError, match=r"holds values beyond \+-1e\+18 for envs \[1\] .* the planner computes in float32"):
+        model.predict(observations)
+
+
+# --- learn's arguments, and what learning needs
+
+
+@pytest.mark.parametrize("total_timesteps", [-100, float("nan"), "400", None, 10.5])
+def test_learn_refuses_a_budget_that_is_not_a_whole_number_of_steps(model, total_timesteps):
+    expected = rf"total_timesteps must be a whole number >= 0; got {re.escape(repr(total_timesteps))}"
+    with pytest.raises(ValueError, match=expected):
+        model.learn(total_timesteps)
+
+
+def test_learn_refuses_a_log_interval_of_zero(model):
+    with pytest.raises(ValueError, match="log_interval must be a positive integer or None; got 0"):
+        model.learn(16, log_interval=0)
+
+
+def test_learn_takes_a_whole_float_budget(demos):
+    assert make_model(demos).learn(16.0).num_timesteps == 16
+
+
+def test_learn_on_a_model_loaded_without_env_says_how_to_give_one(model, demos, tmp_path):
+    model.save(tmp_path / "model")
+    loaded = MPAIL.load(tmp_path / "model")
+    loaded.set_demos(demos)
+    with pytest.raises(ValueError, match=r"MPAIL has no environment to learn in .* model.set_env\(env\)"):
+        loaded.learn(16)
+
+
+def test_load_refuses_a_setting_that_mpail_does_not_have(model, tmp_path):
+    model.save(tmp_path / "model")
+    with pytest.raises(ValueError, match=r"MPAIL.load got settings that MPAIL does not have: \['n_step'\]"):
+        MPAIL.load(tmp_path / "model", n_step=32)
+    assert MPAIL.load(tmp_path / "model", n_steps=32, stats_window_size=7)._stats_window_size == 7
+
+
+# --- policy settings
+
+
+@pytest.mark.parametrize("setting", ["use_step_cost", "use_terminal_value", "use_spectral_norm"])
+def test_flags_given_as_strings_are_refused(demos, setting):
+    with pytest.raises(ValueError, match=f"{setting} must be True or False; got 'no'"):
+        make_model(demos, policy_kwargs=dict(TINY_PLANNER, **{setting: "no"}))
+
+
+def test_an_mppi_policy_refuses_a_discrete_action_space():
+    with pytest.raises(ValueError, match=r"MPPI policies plan continuous actions .*; got Discrete\(3\)"):
+        MPPIPolicy(OBSERVATION_SPACE, spaces.Discrete(3))
+
+
+def test_an_mppi_policy_refuses_infinite_action_bounds_under_python_dash_o():
+    code = (
+        "import numpy as np; from gymnasium import spaces; from sb3_mpail.policies import MPPIPolicy\n"
+        "box = spaces.Box(-np.inf, np.inf, (3,), np.float32)\n"
+        "MPPIPolicy(box, spaces.Box(-np.inf, np.inf, (1,), np.float32))"
+    )
+    result = subprocess.run([sys.executable, "-O", "-c", code], capture_output=True, text=True)
+    assert "MPPI samples actions relative to the action space's range, so its bounds must be finite" in result.stderr
+
+
+# --- saving
+
+
+def test_save_over_a_symbolic_link_writes_its_target(model, tmp_path):
+    target = tmp_path / "models" / "latest.zip"
+    target.parent.mkdir()
+    target.write_bytes(b"old")
+    link = tmp_path / "model.zip"
+    link.symlink_to(target)
+    model.save(link)
+    assert link.is_symlink() and target.stat().st_size > 3
+    MPAIL.load(link)
+
+
+def test_save_refuses_to_overwrite_a_read_only_file(model, tmp_path):
+    path = tmp_path / "model.zip"
+    path.write_bytes(b"keep me")
+    path.chmod(0o444)
+    with pytest.raises(PermissionError, match="is read-only: MPAIL.save does not overwrite it"):
+        model.save(path)
+    assert path.read_bytes() == b"keep me"
+
+
+def test_a_partial_file_left_by_a_killed_save_is_removed_by_the_next_save(model, tmp_path):
+    stale = tmp_path / "model.zip.partial"
+    stale.write_bytes(b"a save killed half-way")
+    model.save(tmp_path / "model")
+    assert not stale.exists()
+    MPAIL.load(tmp_path / "model")
+
+
+class KeepDimCost(nn.Module):
+    """A cost that keeps the state dimension: ``(..., 1)`` instead of one number per transition."""
+
+    def forward(self, states, next_states):
+        return next_states[..., :1].square()
+
+
+class KeepDimValue(nn.Module):
+    def forward(self, states):
+        return states[..., :1]
+
+
+@pytest.mark.parametrize("setting, module", [("step_cost", KeepDimCost()), ("terminal_value", KeepDimValue())])
+def test_a_users_cost_or_value_of_the_wrong_shape_is_refused_naming_it(demos, setting, module):
+    model = make_model(demos, policy_kwargs=dict(TINY_PLANNER, **{setting: module}))
+    with pytest.raises(ValueError, match=rf"{setting} must return a torch tensor of one number per state, shape \(3?,? ?1, 16\)"):
+        model.predict(np.zeros(3, np.float32))

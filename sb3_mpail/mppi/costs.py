@@ -5,7 +5,8 @@ In MPAIL the step cost is the negated discriminator logit, ``c(s, s') = -d_theta
 is the learned ``V_phi``, so both are thin views of networks the algorithm trains.
 """
 
-from typing import Callable, Mapping, Optional, Sequence, Union
+import numbers
+from typing import Any, Callable, List, Mapping, Optional, Sequence, Union
 
 import numpy as np
 import torch as th
@@ -58,17 +59,61 @@ def make_value_network(state_dim: int, hidden_sizes: Sequence[int] = (32, 32)) -
     return nn.Sequential(*create_mlp(state_dim, 1, list(hidden_sizes), nn.ReLU))
 
 
+def _state_indices(indices: Any, name: str) -> List[int]:
+    """
+    ``indices`` as Python ints, refusing anything but a non-empty sequence of integers (numpy's included).
+
+    :param indices: the state indices given
+    :param name: the setting they were given as, which the message names
+    :raises ValueError: ``indices`` is not a non-empty sequence of integers
+    """
+    if not (isinstance(indices, Sequence) and not isinstance(indices, str)) or len(indices) == 0:
+        raise ValueError(f"{name} must be a non-empty list of state indices; got {indices!r}.")
+    if not all(isinstance(index, numbers.Integral) and not isinstance(index, bool) for index in indices):
+        raise ValueError(f"{name} must hold integer state indices; got {list(indices)!r}.")
+    return [int(index) for index in indices]
+
+
+def _check_index_range(indices: Sequence[int], low: int, state_dim: int, name: str) -> None:
+    """
+    Refuses indices outside ``[low, state_dim)``: torch would raise an unclear error or, for a slice, ignore them.
+
+    :param indices: the state indices
+    :param low: the smallest index allowed (``-state_dim`` where negative indices count from the end)
+    :param state_dim: size of a state
+    :param name: the setting they were given as, which the message names
+    :raises ValueError: an index is out of range
+    """
+    outside = [index for index in indices if not low <= index < state_dim]
+    if outside:
+        raise ValueError(
+            f"{name} holds state indices {outside} out of range for the {state_dim}-D state; "
+            f"they must be in [{low}, {state_dim})."
+        )
+
+
 class FeatureSelection(nn.Module):
     """
     Discriminator features that are some of the state's dimensions, e.g. ``[0, 1, 6, 7]`` for the navigation car's
-    position and body-frame velocity (a list of indices is also what a YAML hyperparameter file can hold).
+    position and body-frame velocity (a list of indices is also what a YAML hyperparameter file can hold). Negative
+    indices count from the end, as in Python.
 
     :param indices: the state dimensions kept, in this order
+    :param name: the setting the indices were given as, which error messages name
     """
 
-    def __init__(self, indices: Sequence[int]):
+    def __init__(self, indices: Sequence[int], name: str = "indices"):
         super().__init__()
-        self.register_buffer("indices", th.as_tensor(list(indices), dtype=th.long))
+        self.register_buffer("indices", th.as_tensor(_state_indices(indices, name), dtype=th.long))
+
+    def check_state_dim(self, state_dim: int, name: str) -> None:
+        """
+        Refuses indices out of range for ``state_dim``-D states.
+
+        :param state_dim: size of a state
+        :param name: the setting the indices were given as, which the message names
+        """
+        _check_index_range(self.indices.tolist(), -state_dim, state_dim, name)
 
     def forward(self, states: th.Tensor) -> th.Tensor:
         return states[:, self.indices]
@@ -80,14 +125,26 @@ class AngleFeatures(nn.Module):
     as the continuous, bounded points they are rather than as wrapped numbers: ``-pi + 0.01`` and ``pi - 0.01`` are
     neighbours, and no heading lies beyond the data's range for a network to extrapolate to.
 
-    :param angle_indices: the state dimensions that are angles (e.g. ``[5]``, the navigation car's yaw)
+    :param angle_indices: the state dimensions that are angles (e.g. ``[5]``, the navigation car's yaw), distinct and
+        non-negative (the angles are placed by slicing, which a negative index would misplace)
+    :param name: the setting the indices were given as, which error messages name
     """
 
-    def __init__(self, angle_indices: Sequence[int]):
+    def __init__(self, angle_indices: Sequence[int], name: str = "angle_indices"):
         super().__init__()
-        if len(angle_indices) == 0 or len(set(angle_indices)) != len(angle_indices):
-            raise ValueError(f"AngleFeatures needs distinct angle indices; got {list(angle_indices)}.")
-        self.angle_indices = [int(index) for index in angle_indices]
+        indices = _state_indices(angle_indices, name)
+        if len(set(indices)) != len(indices) or min(indices) < 0:
+            raise ValueError(f"{name} must be distinct angle indices >= 0; got {indices}.")
+        self.angle_indices = indices
+
+    def check_state_dim(self, state_dim: int, name: str) -> None:
+        """
+        Refuses angle indices out of range for ``state_dim``-D states.
+
+        :param state_dim: size of a state
+        :param name: the setting the indices were given as, which the message names
+        """
+        _check_index_range(self.angle_indices, 0, state_dim, name)
 
     def forward(self, states: th.Tensor) -> th.Tensor:
         columns, previous = [], 0
@@ -110,23 +167,26 @@ class FeatureMap(nn.Module):
         self.function = function
 
     @classmethod
-    def wrap(cls, features: FeatureSpec) -> nn.Module:
+    def wrap(cls, features: FeatureSpec, name: str = "discriminator_features") -> nn.Module:
         """
         The module itself, a :class:`FeatureSelection` of state indices, :class:`AngleFeatures` for ``{"angles":
         [indices]}`` (a form a YAML hyperparameter file can hold), or a function wrapped in a :class:`FeatureMap`.
+
+        :param features: the feature map as given
+        :param name: the setting it was given as (``discriminator_features`` or ``value_features``), which error
+            messages name
         """
         if isinstance(features, nn.Module):
             return features
         if isinstance(features, Mapping):
             if set(features) != {"angles"}:
-                raise ValueError(f"A dict of discriminator or value features takes one key, 'angles'; got {dict(features)}.")
-            return AngleFeatures(features["angles"])
-        if isinstance(features, Sequence) and len(features) > 0 and all(isinstance(index, int) for index in features):
-            return FeatureSelection(features)
+                raise ValueError(f"A dict of {name} takes one key, 'angles'; got {dict(features)}.")
+            return AngleFeatures(features["angles"], f"{name}['angles']")
+        if isinstance(features, Sequence) and not isinstance(features, str):
+            return FeatureSelection(features, name)
         if not callable(features):
             raise TypeError(
-                "discriminator_features must be an nn.Module, a callable or a list of state indices, "
-                f"got {type(features).__name__}."
+                f"{name} must be an nn.Module, a callable or a list of state indices, got {type(features).__name__}."
             )
         return cls(features)
 
@@ -134,21 +194,26 @@ class FeatureMap(nn.Module):
         return self.function(states)
 
     @staticmethod
-    def space(features: nn.Module, observation_space: spaces.Box) -> spaces.Box:
+    def space(features: nn.Module, observation_space: spaces.Box, name: str = "discriminator_features") -> spaces.Box:
         """
-        The unbounded ``Box`` of the features, sized by mapping two zero states; refuses maps that do not give
-        ``(batch, n_features)``.
+        The unbounded ``Box`` of the features, sized by mapping two zero states; refuses state indices out of range
+        and maps that do not give ``(batch, n_features)``.
 
         :param features: the feature map
         :param observation_space: the states it maps
+        :param name: the setting it was given as (``discriminator_features`` or ``value_features``), which error
+            messages name
         """
+        state_dim = observation_space.shape[0]
+        if isinstance(features, (FeatureSelection, AngleFeatures)):
+            features.check_state_dim(state_dim, name)
         with th.no_grad():
             probe = features(th.zeros((2, *observation_space.shape)))
         if not isinstance(probe, th.Tensor) or probe.ndim != 2 or probe.shape[0] != 2:
             shape = tuple(probe.shape) if isinstance(probe, th.Tensor) else type(probe).__name__
             raise ValueError(
-                f"discriminator_features must map (batch, {observation_space.shape[0]}) states to a (batch, n_features) "
-                f"tensor; for a batch of 2 it gave {shape}."
+                f"{name} must map (batch, {state_dim}) states to a (batch, n_features) tensor; "
+                f"for a batch of 2 it gave {shape}."
             )
         return spaces.Box(-np.inf, np.inf, (probe.shape[1],), np.float32)
 

@@ -8,6 +8,9 @@ A model may list in ``held_state_dims`` the state dimensions it never changes (a
 ground). The planner's CPU kernel then leaves them out of the discriminator's and the value's products for the
 whole horizon and adds their part once per env, a fifth less work for the 12-D car state. The model must keep them
 exactly: a dimension listed there that moves is costed at its initial value.
+
+A model may declare in ``state_dim`` and ``action_dim`` the sizes it is written for; :func:`make_dynamics` then refuses
+an environment whose observation or action has another size, which the model would otherwise read wrongly or in part.
 """
 
 import math
@@ -18,6 +21,8 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
+
+from sb3_mpail.checks import HIDDEN_SIZES, POSITIVE_INTEGER, check_arguments
 
 DynamicsFunction = Callable[[th.Tensor, th.Tensor], th.Tensor]
 
@@ -70,6 +75,8 @@ class KinematicBicycle(nn.Module):
     """
 
     held_state_dims = (2, 3, 4, 8, 9, 10)  # z, roll, pitch, vz, wx, wy
+    state_dim = 12
+    action_dim = 2
 
     def __init__(self, wheelbase: float = 0.325, max_speed: float = 3.0, max_steer: float = 0.488, dt: float = 0.1):
         super().__init__()
@@ -129,6 +136,8 @@ class PendulumDynamics(nn.Module):
     :param gravity: ``g`` of the environment (gymnasium's default is 10)
     """
 
+    state_dim = 3
+    action_dim = 1
     max_speed = 8.0
     max_torque = 2.0
     dt = 0.05
@@ -355,6 +364,8 @@ class PointMassDynamics(nn.Module):
     """
 
     held_state_dims = (4, 5)  # the goal
+    state_dim = 6
+    action_dim = 2
 
     def __init__(
         self,
@@ -383,9 +394,33 @@ class PointMassDynamics(nn.Module):
         return th.cat((positions, velocities, states[:, 4:]), dim=1)
 
 
+def check_next_states(model: str, states: th.Tensor, actions: th.Tensor, next_states: Any) -> None:
+    """
+    Refuses next states that are not a tensor of the states' shape (a type and shape check: no host sync).
+
+    :param model: the dynamics model, as the message names it
+    :param states: the states it was given
+    :param actions: the actions it was given
+    :param next_states: what it returned
+    :raises TypeError: it returned something other than a torch tensor
+    :raises ValueError: it returned a tensor of another shape
+    """
+    if not isinstance(next_states, th.Tensor):
+        raise TypeError(
+            f"{model} must return next states as a torch tensor; for states {tuple(states.shape)} and actions "
+            f"{tuple(actions.shape)} it returned a {type(next_states).__module__}.{type(next_states).__name__}."
+        )
+    if next_states.shape != states.shape:
+        raise ValueError(
+            f"{model} maps states of shape {tuple(states.shape)} (with actions {tuple(actions.shape)}) to "
+            f"{tuple(next_states.shape)}; it must return next states of the states' shape {tuple(states.shape)}."
+        )
+
+
 class CallableDynamics(nn.Module):
     """
-    Wraps a user's plain function ``f(states, actions) -> next_states`` (torch tensors in, tensor out).
+    Wraps a user's plain function ``f(states, actions) -> next_states`` (torch tensors in, tensor out), refusing on
+    every call what is not a tensor of the states' shape: a function may be right for one batch size only.
 
     :param function: the dynamics function; it must be picklable (cloudpickle) for ``save``/``load``
     """
@@ -394,8 +429,15 @@ class CallableDynamics(nn.Module):
         super().__init__()
         self.function = function
 
+    @property
+    def name(self) -> str:
+        """The function as error messages name it."""
+        return f"The dynamics function {getattr(self.function, '__qualname__', repr(self.function))}"
+
     def forward(self, states: th.Tensor, actions: th.Tensor) -> th.Tensor:
-        return self.function(states, actions)
+        next_states = self.function(states, actions)
+        check_next_states(self.name, states, actions, next_states)
+        return next_states
 
 
 class TransitionReplayBuffer:
@@ -471,6 +513,15 @@ class LearnedDynamics(nn.Module):
         seed: int | None = None,
     ):
         super().__init__()
+        check_arguments(
+            hidden_sizes=(hidden_sizes, HIDDEN_SIZES),
+            buffer_size=(buffer_size, POSITIVE_INTEGER),
+            batch_size=(batch_size, POSITIVE_INTEGER),
+            n_epochs=(n_epochs, POSITIVE_INTEGER),
+            lr_decay_every=(lr_decay_every, POSITIVE_INTEGER),
+        )
+        self.state_dim = state_dim
+        self.action_dim = action_dim
         self.net = nn.Sequential(*create_mlp(state_dim + action_dim, state_dim, list(hidden_sizes), nn.ReLU))
         self.register_buffer("input_mean", th.zeros(state_dim + action_dim))
         self.register_buffer("input_std", th.ones(state_dim + action_dim))
@@ -562,13 +613,16 @@ def make_dynamics(
     dynamics_kwargs: Dict[str, Any] | None = None,
 ) -> nn.Module:
     """
-    Builds the planner's dynamics model and checks it maps states to states of the observation's shape.
+    Builds the planner's dynamics model and checks it on a probe batch: sizes it declares must be the environment's,
+    and it must map states to new states of the observation's shape, leaving its inputs unchanged.
 
     :param dynamics: a name from :data:`DYNAMICS_MODELS`, an ``nn.Module`` or a plain callable
         ``f(states, actions) -> next_states``
     :param observation_space: the environment's observation space (the planner's state)
     :param action_space: the environment's action space
     :param dynamics_kwargs: keyword arguments for a named model
+    :raises ValueError: no, an unknown or an unfitting model, or one that modifies its inputs in place
+    :raises TypeError: ``dynamics`` is of no kind above, or the model returns something other than a tensor
     """
     dynamics_kwargs = dynamics_kwargs or {}
     if dynamics is None:
@@ -589,13 +643,29 @@ def make_dynamics(
         model = CallableDynamics(dynamics)
     else:
         raise TypeError(f"dynamics must be a model name, an nn.Module or a callable, got {type(dynamics).__name__}.")
-    probe_states = th.as_tensor(np.zeros((2, *observation_space.shape), dtype=np.float32))
-    probe_actions = th.as_tensor(np.zeros((2, *action_space.shape), dtype=np.float32))
+    name = model.name if isinstance(model, CallableDynamics) else f"The dynamics model {type(model).__name__}"
+    if isinstance(dynamics, str):
+        name = f"{name} ({dynamics!r})"
+    sizes = (getattr(model, "state_dim", None), getattr(model, "action_dim", None))
+    env_sizes = (observation_space.shape[0], action_space.shape[0])
+    if None not in sizes and sizes != env_sizes:
+        raise ValueError(
+            f"{name} is written for {sizes[0]}-D states and {sizes[1]}-D actions, but the environment's observations are "
+            f"{env_sizes[0]}-D and its actions {env_sizes[1]}-D: choose a model for this environment."
+        )
+    # random probes, not zeros: a model that adds into or clamps its inputs in place may leave zeros as they were
+    generator = th.Generator().manual_seed(0)
+    probe_states = th.randn((2, *observation_space.shape), generator=generator)
+    probe_actions = th.randn((2, *action_space.shape), generator=generator)
+    given_states, given_actions = probe_states.clone(), probe_actions.clone()
     with th.no_grad():
         predicted = model(probe_states, probe_actions)
-    if tuple(predicted.shape) != tuple(probe_states.shape):
+    check_next_states(name, probe_states, probe_actions, predicted)
+    given = {"states": (probe_states, given_states), "actions": (probe_actions, given_actions)}
+    changed = [what for what, (probe, copy) in given.items() if not th.equal(probe, copy)]
+    if changed:
         raise ValueError(
-            f"The dynamics model {type(model).__name__} maps states of shape {tuple(probe_states.shape)} to "
-            f"{tuple(predicted.shape)}; it must return next states of the observation's shape {observation_space.shape}."
+            f"{name} modified the {' and '.join(changed)} it was given in place; it must leave its inputs unchanged "
+            "(the planner reuses them) and return new next states, e.g. starting from states.clone()."
         )
     return model

@@ -20,6 +20,7 @@ is :func:`sb3_mpail.mppi.reference.reference_plan`; this planner gives the same 
 * optionally the roll-out/cost/weight update is compiled with ``torch.compile`` (``compile_planner``).
 """
 
+import threading
 from typing import Callable, NamedTuple, Optional, Sequence, Tuple, Union
 
 import torch as th
@@ -150,16 +151,36 @@ class TrajectoryCost:
             if self.fused_step_cost is not None:
                 costs = self.fused_step_cost(states, self.markups, self.workspace)
             else:
-                costs = th.einsum("t,ten->en", self.markups, self.step_cost(states[:-1], states[1:]))
+                step_costs = _checked_output(self.step_cost(states[:-1], states[1:]), states.shape[:-1], "step_cost", 1)
+                costs = th.einsum("t,ten->en", self.markups, step_costs)
         if self.terminal_value is not None:
             final_states = states[-1]
             if self.fused_value is not None:
                 values = self.fused_value(final_states, self.workspace)
             else:
-                values = self.terminal_value(final_states)
+                values = _checked_output(self.terminal_value(final_states), final_states.shape[:-1], "terminal_value")
             costs = values * -self.terminal_markup if costs is None else costs.sub_(values, alpha=self.terminal_markup)
         assert costs is not None
         return costs
+
+
+def _checked_output(output: th.Tensor, leading_shape: th.Size, name: str, skipped_steps: int = 0) -> th.Tensor:
+    """
+    A user's cost or value output, refused unless it is one number per state (a shape check: no host sync).
+
+    :param output: what ``name`` returned
+    :param leading_shape: the shape of the states it scored, less their last (state) dimension
+    :param name: the setting it came from, as the error names it
+    :param skipped_steps: time steps fewer than ``leading_shape`` has (transitions are one fewer than states)
+    """
+    expected = (leading_shape[0] - skipped_steps, *leading_shape[1:])
+    if not isinstance(output, th.Tensor) or tuple(output.shape) != expected:
+        got = f"shape {tuple(output.shape)}" if isinstance(output, th.Tensor) else type(output).__name__
+        raise ValueError(
+            f"{name} must return a torch tensor of one number per state, shape {expected} here (the leading shape of "
+            f"the states it was given); got {got}."
+        )
+    return output
 
 
 def _planning_view(network: Optional[Callable], state_dim: int) -> Optional[Callable]:
@@ -226,6 +247,8 @@ class MPPIPlanner(nn.Module):
         self.compile_planner = compile_planner
         self._workspace = Workspace()
         self._compiled_update: Optional[Callable] = None
+        # one planning step at a time: the scratch tensors and the fused views' held inputs are shared between calls
+        self._lock = threading.Lock()
 
     def initial_plan(self, n_envs: int) -> th.Tensor:
         """A fresh plan: the neutral action at every step, ``(n_envs, horizon, action_dim)``."""
@@ -261,16 +284,20 @@ class MPPIPlanner(nn.Module):
     def optimise(
         self, states: th.Tensor, previous_plan: th.Tensor, temperature: th.Tensor, generator: th.Generator
     ) -> LastIteration:
-        """The ``J`` iterations of one planning step (what :meth:`forward` runs), keeping the last one's samples."""
-        plan = shift_plan(previous_plan, self.neutral_action)
-        trajectory_cost = self.trajectory_cost(states, plan.shape[1])
-        update = self._update
-        if self.compile_planner:
-            update = self._compiled()
-        for _ in range(self.n_iterations):
-            actions = self.sampler(plan, self.n_samples, generator)
-            plan, weights, costs = update(states, actions, temperature, trajectory_cost)
-        return LastIteration(plan, actions, weights, costs)
+        """
+        The ``J`` iterations of one planning step (what :meth:`forward` runs), keeping the last one's samples. Safe to
+        call from several threads: the steps run one at a time, and what they return is their own (never scratch).
+        """
+        with self._lock:
+            plan = shift_plan(previous_plan, self.neutral_action)
+            trajectory_cost = self.trajectory_cost(states, plan.shape[1])
+            update = self._update
+            if self.compile_planner:
+                update = self._compiled()
+            for _ in range(self.n_iterations):
+                actions = self.sampler(plan, self.n_samples, generator)
+                plan, weights, costs = update(states, actions, temperature, trajectory_cost)
+            return LastIteration(plan, actions, weights, costs.clone())  # the costs are scratch of the fused views
 
     def _update(
         self, states: th.Tensor, actions: th.Tensor, temperature: th.Tensor, trajectory_cost: TrajectoryCost
@@ -310,4 +337,9 @@ class MPPIPlanner(nn.Module):
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
         state["_compiled_update"] = None  # compiled code is rebuilt on demand, never pickled
+        del state["_lock"]  # locks cannot be pickled; a copy gets its own
         return state
+
+    def __setstate__(self, state: dict) -> None:
+        super().__setstate__(state)
+        self._lock = threading.Lock()
