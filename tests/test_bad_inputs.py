@@ -486,5 +486,6 @@ class KeepDimValue(nn.Module):
 @pytest.mark.parametrize("setting, module", [("step_cost", KeepDimCost()), ("terminal_value", KeepDimValue())])
 def test_a_users_cost_or_value_of_the_wrong_shape_is_refused_naming_it(demos, setting, module):
     model = make_model(demos, policy_kwargs=dict(TINY_PLANNER, **{setting: module}))
-    with pytest.raises(ValueError, match=rf"{setting} must return a torch tensor of one number per state, shape \(3?,? ?1, 16\)"):
+    expected = rf"{setting} must return a torch tensor of one number per state, shape \(3?,? ?1, 16\)"
+    with pytest.raises(ValueError, match=expected):
         model.predict(np.zeros(3, np.float32))
