@@ -143,6 +143,9 @@ def test_dynamics_that_modify_their_inputs_in_place_are_refused_naming_what_they
         ("bicycle", 3, 2, r"KinematicBicycle \('bicycle'\) is written for 12-D states and 2-D actions, but the "
                           r"environment's observations are 3-D"),
         ("point_mass", 12, 2, r"PointMassDynamics \('point_mass'\) is written for 6-D states .* observations are 12-D"),
+        ("parking", 6, 2, r"ParkingKinematics \('parking'\) is written for 12-D states .* observations are 6-D"),
+        ("highway", 12, 2, r"HighwayKinematics \('highway'\) is written for 6-D states .* observations are 12-D"),
+        ("racetrack", 6, 2, r"RacetrackKinematics \('racetrack'\) is written for 6-D states and 1-D actions, .* actions 2-D"),
     ],
 )  # fmt: skip
 def test_a_named_model_on_an_env_of_other_sizes_is_refused_naming_the_model_and_the_sizes(name, states, actions, expected):

@@ -205,6 +205,8 @@ class ParkingKinematics(nn.Module):
     """
 
     held_state_dims = tuple(range(6, 12))  # the goal
+    state_dim = 12
+    action_dim = 2
 
     def __init__(
         self,

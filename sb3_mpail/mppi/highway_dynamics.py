@@ -30,6 +30,7 @@ class HighwayKinematics(ParkingKinematics):
     """
 
     held_state_dims = ()  # the road scenarios' observations have no goal
+    state_dim = 6
 
     def __init__(self, position_scale: float = 10.0, velocity_scale: float = 10.0, **kwargs: Any):
         super().__init__(position_scale=position_scale, velocity_scale=velocity_scale, **kwargs)
@@ -42,6 +43,8 @@ class RacetrackKinematics(HighwayKinematics):
     Euler steps, 3 per action) with the acceleration that highway-env applies when only steering is controlled, zero,
     so the speed is held. Takes :class:`HighwayKinematics`'s parameters.
     """
+
+    action_dim = 1
 
     def forward(self, states: th.Tensor, actions: th.Tensor) -> th.Tensor:
         return super().forward(states, with_zero_acceleration(actions))
