@@ -375,11 +375,12 @@ def check_demos_fit_space(
             UserWarning,
             stacklevel=3,
         )
-    huge = np.abs(values) > HUGE_DEMO_VALUE
+    magnitudes = np.abs(values)
+    huge = magnitudes > HUGE_DEMO_VALUE
     if huge.any():
         warnings.warn(
             f"{np.count_nonzero(huge)} of the values in the demos' (s, s') pairs exceed {HUGE_DEMO_VALUE:g} in magnitude "
-            f"(up to {np.abs(values).max():g}): such values make the discriminator's loss explode (to 4.6e24 on demos "
+            f"(up to {magnitudes.max():g}): such values make the discriminator's loss explode (to 4.6e24 on demos "
             "of 1e30). Check the demos' units, and that they were recorded in this environment.",
             UserWarning,
             stacklevel=3,

@@ -283,7 +283,7 @@ class MPPIPolicy(BasePolicy):
         :param episode_start: per env, whether its episode just started (its plan is reset)
         :param deterministic: execute the plan's first action instead of sampling around it
         :return: the actions and the plans to pass back as ``state`` on the next call
-        :raises ValueError: an observation or ``state`` holds NaN or infinite values, an observation values beyond
+        :raises ValueError: an observation or ``state`` holds NaN or infinite values, an observation holds values beyond
             ``LARGE_OBSERVATION``, or the planner made a non-finite plan (the error names the env); ``state`` is not
             plans of this model's shape; ``episode_start`` is not one flag per env
         """
