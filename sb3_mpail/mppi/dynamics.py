@@ -14,6 +14,7 @@ an environment whose observation or action has another size, which the model wou
 """
 
 import math
+from functools import cached_property
 from typing import Any, Callable, Dict, Sequence, Tuple, Union
 
 import numpy as np
@@ -431,7 +432,7 @@ class CallableDynamics(nn.Module):
         super().__init__()
         self.function = function
 
-    @property
+    @cached_property  # built once, not on every call of the planner's hot path
     def name(self) -> str:
         """The function as error messages name it."""
         return f"The dynamics function {getattr(self.function, '__qualname__', repr(self.function))}"
