@@ -42,7 +42,7 @@ from imitation.algorithms.adversarial.gail import GAIL
 from imitation.data import rollout, types
 from imitation.rewards.reward_nets import BasicShapedRewardNet, RewardNet
 from imitation.util import logger as imitation_logger
-from stable_baselines3 import PPO
+from stable_baselines3 import PPO, TD3
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.policies import ActorCriticPolicy
@@ -54,6 +54,7 @@ from torch.nn.utils.parametrizations import spectral_norm
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
 from sb3_mpail.demos import DemoSource, list_shipped_demos, load_demos, shipped_demos
 from sb3_mpail.envs import cartpole
+from sb3_mpail.envs.locomotion import LOCOMOTION_TASKS
 from sb3_mpail.mppi.costs import FeatureSelection, make_transition_discriminator
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, PendulumDynamics
 from sb3_mpail.zoo import HYPERPARAMS
@@ -81,6 +82,7 @@ ENV_NAMES: Dict[str, str] = {
     "Pendulum-v1": "pendulum",
     "sb3_mpail/ContinuousCartPole-v0": "cartpole",
     "sb3_mpail/NavigationLap-v0": "lap",
+    **LOCOMOTION_TASKS,
 }
 #: keys of a config entry that are strings of Python expressions (rl_zoo3 evaluates ``policy_kwargs`` this way)
 EXPRESSION_KEYS = ("policy_kwargs", "reward_net_kwargs")
@@ -705,14 +707,16 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
     Writes ``<out_dir>/<env>_<n>_actions.npz`` (``obs`` and the expert's ``acts``) for each shipped demo set
     ``<env>_<n>``, after checking that the actions reproduce the shipped observations.
 
-    Navigation: replays the PPO expert that ``demos/make_navigation_demos.py`` saved (``expert_path``; rerunning that
+    MuJoCo locomotion (``hopper``, ``walker2d``, ``halfcheetah``): replays the TD3 expert that
+    ``demos/make_mujoco_demos.py --save-expert`` saved (``expert_path``) from the demos' start seeds. Navigation:
+    replays the PPO expert that ``demos/make_navigation_demos.py`` saved (``expert_path``; rerunning that
     script retrains the same expert bit for bit on this stack) from the demos' start seeds. Pendulum and cartpole:
     the actions are recovered from the shipped observations by inverting the env's known dynamics
     (:func:`pendulum_actions`, :func:`cartpole_actions`), so no expert is needed; every step is checked against the
     exact model.
 
-    :param env: ``navigation``, ``pendulum`` or ``cartpole``
-    :param expert_path: the navigation expert
+    :param env: ``navigation``, ``pendulum``, ``cartpole`` or a MuJoCo task's name
+    :param expert_path: the navigation or MuJoCo expert
     :param out_dir: where the files go
     :raises RuntimeError: the actions do not reproduce a shipped demo
     """
@@ -723,7 +727,13 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
     if not sizes:
         raise FileNotFoundError(f"No {name}_<n> demo set is shipped ({', '.join(list_shipped_demos())}).")
     demos = np.stack([trajectory.obs for trajectory in shipped_demos(name, max(sizes))])
-    if name == "navigation":
+    if env_id in LOCOMOTION_TASKS:  # the TD3 expert demos/make_mujoco_demos.py saved, from the demos' start seeds
+        td3 = TD3.load(expert_path, device="cpu")
+        seed_offset = _demo_script("expert_rollouts").DEMO_SEED_OFFSET
+        replays = [_replay(gym_env, lambda obs: td3.predict(obs, deterministic=True)[0], seed_offset + i, demos.shape[1] - 1)
+                   for i in range(len(demos))]  # fmt: skip
+        reproduced, actions = np.stack([obs for obs, _ in replays]), np.stack([acts for _, acts in replays])
+    elif name == "navigation":
         script = _demo_script("make_navigation_demos")
         expert = script.make_expert_policy(PPO.load(expert_path or "/tmp/navigation_expert_ppo.zip", device="cpu"), gym_env)
         replays = [_replay(gym_env, expert, script.DEMO_SEED_BASE + i, demos.shape[1] - 1) for i in range(len(demos))]
@@ -758,7 +768,7 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     commands = parser.add_subparsers(dest="command", required=True)
     make = commands.add_parser("make-action-demos", help="write benchmarks/action_demos/<env>_<n>_actions.npz for BC")
     make.add_argument("--env", required=True, choices=sorted(ENV_NAMES.values()))
-    make.add_argument("--expert", type=Path, default=None, help="navigation: the saved PPO expert")
+    make.add_argument("--expert", type=Path, default=None, help="navigation: the saved PPO expert; MuJoCo: the TD3 one")
     make.add_argument("--out-dir", type=Path, default=ACTION_DEMO_DIR)
     args = parser.parse_args(argv)
     for path in make_action_demos(args.env, args.expert, args.out_dir):

@@ -45,6 +45,7 @@ from sb3_mpail.checks import (
 from sb3_mpail.demos import DemoSource, ExpertTransitions, load_demos
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, LearnedDynamics
 from sb3_mpail.policies import NON_FINITE_OBSERVATION, NON_FINITE_PLAN, MlpMPPI, MPPIPolicy
+from sb3_mpail.prior import PriorReplay
 
 SelfMPAIL = TypeVar("SelfMPAIL", bound="MPAIL")
 #: settings every MPAIL model file holds and other algorithms' files do not
@@ -100,6 +101,11 @@ class MPAIL(BaseAlgorithm):
         episodes per env so the schedule does not depend on ``n_envs``
     :param min_temperature: temperature floor
     :param temperature_learning_rate: RMSprop learning rate of the learned temperature's logarithm
+    :param prior_buffer_size: transitions the policy prior's replay keeps (with ``policy_kwargs=dict(policy_prior=True)``)
+    :param prior_batch_size: minibatch size of the prior's SAC updates
+    :param prior_updates_per_step: SAC updates of the prior per env step (summed over envs), run after each rollout
+    :param prior_use_terminations: the prior's Q targets stop at terminations (e.g. a fall); ``False`` (MPAIL2's
+        default) bootstraps through them, so that a negative learned reward does not make ending episodes attractive
     :param stats_window_size: episodes averaged in the logged episode return
     :param tensorboard_log: tensorboard log folder
     :param policy_kwargs: keyword arguments of the policy (planner settings, ``dynamics``)
@@ -139,6 +145,10 @@ class MPAIL(BaseAlgorithm):
         temperature_decay: float = 0.01,
         min_temperature: float = 1e-5,
         temperature_learning_rate: float = 1e-4,
+        prior_buffer_size: int = 1_000_000,
+        prior_batch_size: int = 256,
+        prior_updates_per_step: float = 1.0,
+        prior_use_terminations: bool = False,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         policy_kwargs: Dict[str, Any] | None = None,
@@ -180,6 +190,11 @@ class MPAIL(BaseAlgorithm):
         self.temperature_decay = temperature_decay
         self.min_temperature = min_temperature
         self.temperature_learning_rate = temperature_learning_rate
+        self.prior_buffer_size = prior_buffer_size
+        self.prior_batch_size = prior_batch_size
+        self.prior_updates_per_step = prior_updates_per_step
+        self.prior_use_terminations = prior_use_terminations
+        self.prior_replay: PriorReplay | None = None
         self.episodes_completed = 0
         self.n_iterations = 0
         self.expert: ExpertTransitions | None = None
@@ -217,6 +232,10 @@ class MPAIL(BaseAlgorithm):
             min_temperature=(self.min_temperature, POSITIVE_NUMBER),
             temperature=(self.temperature_mode, one_of(TEMPERATURES)),
             temperature_learning_rate=(self.temperature_learning_rate, POSITIVE_NUMBER),
+            prior_buffer_size=(self.prior_buffer_size, POSITIVE_INTEGER),
+            prior_batch_size=(self.prior_batch_size, POSITIVE_INTEGER),
+            prior_updates_per_step=(self.prior_updates_per_step, NON_NEGATIVE_NUMBER),
+            prior_use_terminations=(self.prior_use_terminations, BOOLEAN),
             stats_window_size=(self._stats_window_size, POSITIVE_INTEGER),
             policy_kwargs=(self.policy_kwargs, OPTIONAL_DICT),
             verbose=(self.verbose, NON_NEGATIVE_INTEGER),
@@ -306,7 +325,7 @@ class MPAIL(BaseAlgorithm):
         return max(self.initial_temperature * (1 - self.temperature_decay) ** episodes_per_env, self.min_temperature)
 
     def _excluded_save_params(self) -> List[str]:
-        return [*super()._excluded_save_params(), "expert", "_plan", "discriminator_replay"]
+        return [*super()._excluded_save_params(), "expert", "_plan", "discriminator_replay", "prior_replay"]
 
     def _get_torch_save_params(self) -> Tuple[List[str], List[str]]:
         state_dicts = ["policy", "discriminator_optimizer", "value_optimizer"]
@@ -477,6 +496,8 @@ class MPAIL(BaseAlgorithm):
                 next_obs[index] = infos[index]["terminal_observation"]
                 timeouts[index] = infos[index].get("TimeLimit.truncated", False)
             check_finite(next_obs, "The terminal observation the environment returned", NON_FINITE_OBSERVATION)
+            if self.policy.prior is not None:
+                self._prior_replay().add(self.policy.prior, self._last_obs, next_obs, actions, dones, infos)
             self.rollout_buffer.add_transition(self._last_obs, actions, next_obs, self._last_episode_starts, timeouts)
             self.episodes_completed += int(dones.sum())
             if self.temperature_mode == "decay":
@@ -507,9 +528,7 @@ class MPAIL(BaseAlgorithm):
         with th.no_grad():
             observations = self._tensor(buffer.flat("observations"))
             next_observations = self._tensor(buffer.flat("next_observations"))
-            rewards = self.policy.discriminator(
-                self.policy.features(observations), None, self.policy.features(next_observations), None
-            )
+            rewards = self._learned_reward(observations, next_observations)
             next_values = self.policy.value_net(next_observations).squeeze(-1)
             values = self.policy.value_net(observations).squeeze(-1)
             last_values = self.policy.value_net(self._tensor(last_obs)).squeeze(-1)
@@ -519,6 +538,26 @@ class MPAIL(BaseAlgorithm):
         buffer.values = values.cpu().numpy().reshape(shape)
         buffer.compute_returns_and_advantage(last_values, dones)
         self.logger.record("rollout/learned_reward_mean", rewards.mean().item())
+
+    def _learned_reward(self, observations: th.Tensor, next_observations: th.Tensor) -> th.Tensor:
+        """``r = d_theta(s, s')`` on ``(batch, obs_dim)`` observations, ``(batch,)``."""
+        features, next_features = self.policy.features(observations), self.policy.features(next_observations)
+        return self.policy.discriminator(features, None, next_features, None)
+
+    def _prior_replay(self) -> PriorReplay:
+        """The policy prior's replay of every transition (created on first use; never saved, as SB3's replay buffers)."""
+        if self.prior_replay is None:
+            self.prior_replay = PriorReplay(
+                self.observation_space,
+                self.action_space,
+                self.n_envs,
+                self.prior_buffer_size,
+                self.prior_batch_size,
+                self.prior_updates_per_step,
+                self.device,
+                self.prior_use_terminations,
+            )
+        return self.prior_replay
 
     def _minibatches(self, n_items: int) -> List[th.Tensor]:
         batch_size = math.ceil(n_items / self.n_minibatches)
@@ -535,7 +574,12 @@ class MPAIL(BaseAlgorithm):
         whole_rollout = buffer.buffer_size == self.n_steps
         if whole_rollout and (self.n_iterations - 1) % self.discriminator_update_interval == 0:
             self._train_discriminator(observations, next_observations)
-        self._train_value(observations)
+        if self.policy.prior is None:
+            self._train_value(observations)
+        else:  # the prior's Q ensemble, trained off-policy, is the planner's value
+            figures = self._prior_replay().train(self.policy.prior, self._learned_reward, buffer.buffer_size * buffer.n_envs)
+            for name, value in figures.items():
+                self.logger.record(f"train/prior_{name}", value)
         if isinstance(self.policy.dynamics, LearnedDynamics):
             loss = self.policy.dynamics.fit(
                 buffer.flat("observations"), buffer.flat("actions"), buffer.flat("next_observations")

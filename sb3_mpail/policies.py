@@ -11,6 +11,7 @@ from torch import nn
 from sb3_mpail.checks import (
     BOOLEAN,
     HIDDEN_SIZES,
+    NON_NEGATIVE_INTEGER,
     NON_NEGATIVE_NUMBER,
     OPTIONAL_DICT,
     check_arguments,
@@ -29,6 +30,7 @@ from sb3_mpail.mppi.costs import (
 from sb3_mpail.mppi.dynamics import DynamicsSpec, LearnedDynamics, make_dynamics
 from sb3_mpail.mppi.planner import MPPIPlanner, weighted_action_std
 from sb3_mpail.mppi.sampling import make_sampler
+from sb3_mpail.prior import PolicyPrior, PriorValue
 
 #: deterministic planning draws its sampling noise afresh from this seed at every call, so its actions are a pure
 #: function of the inputs (and the model), whatever was planned before and whatever the model's seed
@@ -83,6 +85,12 @@ class MPPIPolicy(BasePolicy):
     :param terminal_value: replaces the learned value in the planner: ``V(states)`` over any leading shape
     :param compile_planner: compile the planner's roll-out/cost/weight update with ``torch.compile``: ``False``
         (default), ``True`` or a ``torch.compile`` mode (``"reduce-overhead"`` uses CUDA graphs on a GPU); same plans
+    :param policy_prior: learned-model MPAIL's policy prior (:class:`~sb3_mpail.prior.PolicyPrior`, trained off-policy
+        by :class:`~sb3_mpail.MPAIL` on the learned reward): its actor proposes ``n_proposals`` of the sequences and
+        its Q ensemble is the terminal value (unless ``terminal_value`` is given); ``False``: the paper's planner
+    :param prior_kwargs: keyword arguments of the :class:`~sb3_mpail.prior.PolicyPrior` (``net_arch``, ``n_critics``,
+        ``learning_rate``, ``gamma``, ``tau``)
+    :param n_proposals: sequences per env the prior adds to each iteration's ``n_samples``
     :raises ValueError: a setting is out of its range (each is named)
     """
 
@@ -109,6 +117,9 @@ class MPPIPolicy(BasePolicy):
         step_cost: nn.Module | None = None,
         terminal_value: nn.Module | None = None,
         compile_planner: Union[bool, str] = False,
+        policy_prior: bool = False,
+        prior_kwargs: Dict[str, Any] | None = None,
+        n_proposals: int = 24,
     ):
         super().__init__(observation_space, action_space)
         if not isinstance(observation_space, spaces.Box) or len(observation_space.shape) != 1:
@@ -130,6 +141,9 @@ class MPPIPolicy(BasePolicy):
             discriminator_hidden_sizes=(discriminator_hidden_sizes, HIDDEN_SIZES),
             value_hidden_sizes=(value_hidden_sizes, HIDDEN_SIZES),
             sampler_kwargs=(sampler_kwargs, OPTIONAL_DICT),
+            policy_prior=(policy_prior, BOOLEAN),
+            prior_kwargs=(prior_kwargs, OPTIONAL_DICT),
+            n_proposals=(n_proposals, NON_NEGATIVE_INTEGER),
         )
         self._constructor_kwargs = dict(
             dynamics=dynamics,
@@ -151,6 +165,9 @@ class MPPIPolicy(BasePolicy):
             step_cost=step_cost,
             terminal_value=terminal_value,
             compile_planner=compile_planner,
+            policy_prior=policy_prior,
+            prior_kwargs=prior_kwargs,
+            n_proposals=n_proposals,
         )
         self.discriminator_features: nn.Module | None = None
         self.feature_space = observation_space
@@ -166,12 +183,15 @@ class MPPIPolicy(BasePolicy):
             value_inputs = FeatureMap.space(mapped, observation_space, "value_features").shape[0]
             self.value_net = MappedNetwork(mapped, make_value_network(value_inputs, value_hidden_sizes))
         self.dynamics = make_dynamics(dynamics, observation_space, action_space, dynamics_kwargs)
+        self.prior = PolicyPrior(observation_space, action_space, **(prior_kwargs or {})) if policy_prior else None
+        if terminal_value is None:
+            terminal_value = TerminalValue(self.value_net) if self.prior is None else PriorValue(self.prior)
         low, high = action_space.low.astype(np.float32), action_space.high.astype(np.float32)
         self.planner = MPPIPlanner(
             dynamics=self.dynamics,
             sampler=make_sampler(sampler, low, high, noise_std, sampler_kwargs),
             step_cost=step_cost if step_cost is not None else TransitionCost(self.discriminator, self.discriminator_features),
-            terminal_value=terminal_value if terminal_value is not None else TerminalValue(self.value_net),
+            terminal_value=terminal_value,
             # the paper's zero mean, kept inside the bounds for spaces that exclude 0
             neutral_action=th.as_tensor(np.clip(np.zeros_like(low), low, high)),
             n_samples=n_samples,
@@ -181,6 +201,8 @@ class MPPIPolicy(BasePolicy):
             use_step_cost=use_step_cost,
             use_terminal_value=use_terminal_value,
             compile_planner=compile_planner,
+            prior=self.prior,
+            n_proposals=n_proposals,
         )
         self.register_buffer("temperature", th.tensor(1.0))
         self.register_buffer("action_low", th.as_tensor(low))

@@ -12,6 +12,7 @@ import sb3_mpail.mppi.fused as fused
 from sb3_mpail.envs.navigation import NavigationEnv
 from sb3_mpail.mppi import AngleFeatures, KinematicBicycle, PendulumDynamics
 from sb3_mpail.mppi.costs import MappedView
+from sb3_mpail.mppi.dynamics import LearnedDynamics
 from sb3_mpail.mppi.planner import rollout
 from sb3_mpail.mppi.reference import rollout as rollout_step_by_step
 from sb3_mpail.policies import MPPIPolicy
@@ -267,6 +268,22 @@ def test_batched_rollouts_match_step_by_step_rollouts(model, states):
     assert batched.shape == step_by_step.shape
     assert th.equal(batched[0], step_by_step[0].contiguous())
     assert th.allclose(batched, step_by_step, atol=1e-10, rtol=0)
+
+
+@pytest.mark.parametrize("hidden_sizes", [(32, 32, 32), (8,), ()])
+def test_a_learned_models_batched_rollout_matches_its_step_by_step_forward(hidden_sizes):
+    rng = np.random.default_rng(0)
+    states = rng.normal(3.0, 2.0, size=(400, 4)).astype(np.float32)  # normalisations far from the identity
+    actions = rng.uniform(-1, 1, size=(400, 2)).astype(np.float32)
+    model = LearnedDynamics(4, 2, hidden_sizes=hidden_sizes, n_epochs=2, seed=0)
+    model.fit(states, actions, 0.9 * states + np.repeat(actions, 2, axis=1))
+    initial_states = th.as_tensor(states[:3])
+    sequences = th.as_tensor(rng.uniform(-1, 1, size=(6, 3, 5, 2)).astype(np.float32))
+    with th.no_grad():
+        batched = rollout(model, initial_states, sequences)
+        step_by_step = rollout_step_by_step(model, initial_states, sequences)
+    assert batched.shape == step_by_step.shape == (7, 3, 5, 4)
+    assert th.allclose(batched, step_by_step, atol=1e-5, rtol=1e-5)
 
 
 def test_compiled_planner_matches_the_eager_one():

@@ -9,14 +9,14 @@ budget covers many episodes, and with float32 observations (MPAIL's networks and
 float64).
 """
 
-from typing import Any, Dict, List
+from typing import Any, Dict
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from sb3_mpail.envs import SCENARIOS_INSTALL_HINT
-from sb3_mpail.evaluation import evaluate_episodes
+from sb3_mpail.envs.locomotion import evaluate_locomotion
 
 ANT_FORWARD_VELOCITY_INDEX = 13
 
@@ -66,23 +66,13 @@ def make_ant(**kwargs: Any) -> gym.Env:
 def evaluate_ant(model: Any, n_episodes: int, seed: int, n_envs: int = 1) -> Dict[str, float]:
     """
     Evaluates a deterministic policy on ``sb3_mpail/Ant-v0``: its return and its forward speed, the paper's measure of
-    how well MPAIL's Ant walks next to the expert.
+    how well MPAIL's Ant walks next to the expert (:func:`sb3_mpail.envs.locomotion.evaluate_locomotion`).
 
     :param model: anything with SB3's ``predict`` (an SB3 expert, MPAIL)
     :param n_episodes: number of evaluation episodes
     :param seed: seed of the evaluation environments
     :param n_envs: environments stepped together (the episodes are split between them)
-    :return: ``return`` and ``return_std`` over the episodes, and ``forward_speed``: the torso's x velocity (m/s)
-        averaged over every step of every episode
+    :return: ``return`` and ``return_std`` over the episodes, ``length``, and ``forward_speed``: the torso's x velocity
+        (m/s) averaged over every step of every episode
     """
-    forward_velocities: List[float] = []
-
-    def record_forward_velocity(info: Dict[str, Any], _: bool) -> None:
-        forward_velocities.append(float(info["x_velocity"]))
-
-    episodes = evaluate_episodes(model, "sb3_mpail/Ant-v0", n_episodes, seed, n_envs, on_step=record_forward_velocity)
-    return {
-        "return": episodes.mean_return,
-        "return_std": episodes.std_return,
-        "forward_speed": float(np.mean(forward_velocities)),
-    }
+    return evaluate_locomotion(model, "sb3_mpail/Ant-v0", n_episodes, seed, n_envs)

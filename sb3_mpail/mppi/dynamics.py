@@ -545,6 +545,40 @@ class LearnedDynamics(nn.Module):
         inputs = (th.cat((states, actions), dim=1) - self.input_mean) / self.input_std
         return states + self.net(inputs) * self.delta_std + self.delta_mean
 
+    def rollout(self, initial_states: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        """
+        :meth:`forward` over whole sequences (the planner's path without gradients): the input and output
+        normalisations are folded into the first and last layers, the first layer is split into its state and action
+        parts, and the action part of every step is one matrix product before the roll-out, so each step is the
+        network's products alone, written into preallocated storage.
+
+        :param initial_states: ``(n_envs, state_dim)``
+        :param actions: time-major sequences, ``(horizon, n_envs, n_samples, action_dim)``
+        :return: states ``s_0 .. s_H``, ``(horizon + 1, n_envs, n_samples, state_dim)``
+        """
+        horizon, n_envs, n_samples, action_dim = actions.shape
+        layers = [(layer.weight, layer.bias) for layer in self.net if isinstance(layer, nn.Linear)]
+        weight, bias = layers[0]
+        weight = weight / self.input_std
+        layers[0] = (weight, bias - weight @ self.input_mean)
+        weight, bias = layers[-1]
+        layers[-1] = (weight * self.delta_std.unsqueeze(1), bias * self.delta_std + self.delta_mean)
+        (first_weight, first_bias), later = layers[0], layers[1:]
+        state_weight, action_weight = first_weight[:, : self.state_dim], first_weight[:, self.state_dim :]
+        action_parts = th.addmm(first_bias, actions.reshape(-1, action_dim), action_weight.t())
+        action_parts = action_parts.view(horizon, n_envs * n_samples, -1)
+        states = actions.new_empty(horizon + 1, n_envs, n_samples, self.state_dim)
+        states[0] = initial_states.unsqueeze(1)
+        current = states[0].view(n_envs * n_samples, self.state_dim)
+        for step in range(horizon):
+            hidden = th.addmm(action_parts[step], current, state_weight.t())
+            for weight, bias in later:
+                hidden = th.addmm(bias, hidden.relu_(), weight.t())
+            following = states[step + 1].view(n_envs * n_samples, self.state_dim)
+            th.add(current, hidden, out=following)
+            current = following
+        return states
+
     def seed(self, seed: int | None) -> None:
         """Re-seeds the replay buffer's replacement positions and the minibatch order."""
         self.replay_buffer.rng = np.random.default_rng(seed)

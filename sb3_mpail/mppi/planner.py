@@ -5,7 +5,7 @@ One planning step, for every env at once:
 
 1. **warm start**: shift the previous plan one step forward, the new last step at the neutral action;
 2. repeat ``J`` times:
-   a. **sample** ``N`` action sequences around the plan,
+   a. **sample** ``N`` action sequences around the plan (and add the policy prior's ``K`` proposals, when there is one),
    b. **roll out** each through the dynamics model for ``H`` steps,
    c. **cost** each trajectory: ``C = sum_t eta^t c(s_t, s_{t+1}) - eta^H V(s_H)``,
    d. **weight** the samples by ``softmax(-C / temperature)`` and set the plan to the weighted mean;
@@ -26,7 +26,7 @@ from typing import Callable, NamedTuple, Optional, Sequence, Tuple, Union
 import torch as th
 from torch import nn
 
-from sb3_mpail.checks import POSITIVE_INTEGER, POSITIVE_NUMBER, Rule, check_arguments
+from sb3_mpail.checks import NON_NEGATIVE_INTEGER, POSITIVE_INTEGER, POSITIVE_NUMBER, Rule, check_arguments
 from sb3_mpail.mppi.dynamics import DynamicsFunction
 from sb3_mpail.mppi.fused import Workspace
 from sb3_mpail.mppi.reference import (
@@ -206,6 +206,9 @@ class MPPIPlanner(nn.Module):
     :param use_terminal_value: include the terminal value (switch off for the cost-only ablation)
     :param compile_planner: compile the roll-out/cost/weight update with ``torch.compile``: ``False`` (default),
         ``True`` (default mode) or a ``torch.compile`` mode such as ``"reduce-overhead"`` (CUDA graphs on a GPU)
+    :param prior: a policy prior (:class:`~sb3_mpail.prior.PolicyPrior`) whose ``propose(dynamics, states, horizon,
+        n_proposals, generator)`` adds ``n_proposals`` sequences to every iteration's samples, or ``None``
+    :param n_proposals: ``K``, the prior's sequences per env, drawn once per planning step
     """
 
     def __init__(
@@ -222,9 +225,12 @@ class MPPIPlanner(nn.Module):
         use_step_cost: bool = True,
         use_terminal_value: bool = True,
         compile_planner: Union[bool, str] = False,
+        prior: Optional[nn.Module] = None,
+        n_proposals: int = 0,
     ):
         super().__init__()
         check_arguments(
+            n_proposals=(n_proposals, NON_NEGATIVE_INTEGER),
             n_samples=(n_samples, POSITIVE_INTEGER),
             horizon=(horizon, POSITIVE_INTEGER),
             n_iterations=(n_iterations, POSITIVE_INTEGER),
@@ -245,6 +251,8 @@ class MPPIPlanner(nn.Module):
         self.use_step_cost = use_step_cost
         self.use_terminal_value = use_terminal_value
         self.compile_planner = compile_planner
+        self.prior = prior
+        self.n_proposals = n_proposals if prior is not None else 0
         self._workspace = Workspace()
         self._compiled_update: Optional[Callable] = None
         # one planning step at a time: the scratch tensors and the fused views' held inputs are shared between calls
@@ -294,10 +302,19 @@ class MPPIPlanner(nn.Module):
             update = self._update
             if self.compile_planner:
                 update = self._compiled()
+            proposals = self._proposals(states, plan.shape[1], generator)
             for _ in range(self.n_iterations):
                 actions = self.sampler(plan, self.n_samples, generator)
+                if proposals is not None:
+                    actions = th.cat((actions, proposals), dim=2)
                 plan, weights, costs = update(states, actions, temperature, trajectory_cost)
             return LastIteration(plan, actions, weights, costs.clone())  # the costs are scratch of the fused views
+
+    def _proposals(self, states: th.Tensor, horizon: int, generator: th.Generator) -> Optional[th.Tensor]:
+        """The prior's sequences of this planning step, ``(horizon, n_envs, K, action_dim)``, or ``None`` without one."""
+        if self.prior is None or self.n_proposals == 0:
+            return None
+        return self.prior.propose(self.dynamics, states, horizon, self.n_proposals, generator)
 
     def _update(
         self, states: th.Tensor, actions: th.Tensor, temperature: th.Tensor, trajectory_cost: TrajectoryCost

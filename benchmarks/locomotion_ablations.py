@@ -1,0 +1,159 @@
+"""
+What learned-model MPAIL needs on MuJoCo locomotion: one setting of a task's ``sb3_mpail/hyperparams/mpail.yml`` entry
+changed at a time, each over several seeds, every model scored deterministically by its return (normalised against
+the shipped demos' expert and random policy) and its forward speed.
+
+Every variant trains ``MPAIL`` with the task's zoo entry (``n_envs``, ``n_timesteps`` unless ``--timesteps``) and
+the changes listed in :data:`VARIANTS`, then plays ``--eval-episodes`` deterministic episodes from fixed seeds
+(:func:`sb3_mpail.envs.locomotion.evaluate_locomotion`). Results go to
+``benchmarks/results/locomotion_ablations/<task>_<steps>steps/<variant>_seed<N>.json`` (a rerun skips finished runs),
+the table to the ``locomotion-ablations`` section of BENCHMARKS.md.
+
+Usage::
+
+    python -m benchmarks.locomotion_ablations --env Hopper-v4 --seeds 0 1 2 --workers 2
+    python -m benchmarks.locomotion_ablations --env Hopper-v4 --variants defaults no-prior --timesteps 50000 --seeds 0
+    python -m benchmarks.locomotion_ablations --report-only
+"""
+
+import argparse
+import json
+import multiprocessing
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence
+
+import torch as th
+from stable_baselines3.common.env_util import make_vec_env
+
+from benchmarks.report import machine_description, write_section
+from benchmarks.runner import format_ci, mean_ci
+from benchmarks.scenarios import zoo_hyperparameters
+from sb3_mpail import MPAIL
+from sb3_mpail.demos import shipped_demo_info
+from sb3_mpail.envs.locomotion import evaluate_locomotion
+from sb3_mpail.evaluation import normalised_score
+
+RESULTS_DIR = Path(__file__).resolve().parent / "results" / "locomotion_ablations"
+#: evaluation episodes start from ``reset(seed=EVAL_SEED + i)`` (disjoint from the demos' start seeds)
+EVAL_SEED = 20_000
+
+#: every variant: what the row tests, and its changes to the zoo entry (``policy_kwargs`` merged key by key)
+VARIANTS: Dict[str, Dict[str, Any]] = {
+    "defaults": dict(question="the task's zoo entry", changes={}),
+    "no-prior": dict(
+        question="the paper's learned-model MPAIL: no policy prior, on-policy GAE value",
+        changes=dict(policy_kwargs=dict(policy_prior=False)),
+    ),
+    "no-proposals": dict(
+        question="the prior's Q ensemble as the value, but no proposals from its actor",
+        changes=dict(policy_kwargs=dict(n_proposals=0)),
+    ),
+    "prior-terminations": dict(
+        question="the prior's Q targets stop at terminations (falls)", changes=dict(prior_use_terminations=True)
+    ),
+    "prior-updates-1": dict(question="one prior update per env step", changes=dict(prior_updates_per_step=1.0)),
+    "discriminator-replay": dict(
+        question="the discriminator also sees the last 50,000 agent transitions",
+        changes=dict(discriminator_replay_size=50_000),
+    ),
+}
+
+
+def variant_settings(env_id: str, name: str) -> Dict[str, Any]:
+    """The task's zoo entry with the variant's changes: ``MPAIL`` arguments plus ``n_envs`` and ``n_timesteps``."""
+    settings = zoo_hyperparameters(env_id)
+    for key, value in VARIANTS[name]["changes"].items():
+        settings[key] = {**settings.get(key, {}), **value} if key == "policy_kwargs" else value
+    return settings
+
+
+def results_dir_of(env_id: str, timesteps: int, results_dir: Path = RESULTS_DIR) -> Path:
+    return Path(results_dir) / f"{env_id.split('/')[-1]}_{timesteps}steps"
+
+
+def run_variant(env_id: str, name: str, seed: int, timesteps: Optional[int], n_eval_episodes: int, out_dir: Path) -> Path:
+    """
+    Trains one variant on one seed, evaluates it and writes its result (skipped when the file exists).
+
+    :return: the result file
+    """
+    path = Path(out_dir) / f"{name}_seed{seed}.json"
+    if path.exists():
+        return path
+    th.set_num_threads(1)
+    settings = variant_settings(env_id, name)
+    n_envs, budget = settings.pop("n_envs"), int(settings.pop("n_timesteps"))
+    budget = budget if timesteps is None else timesteps
+    model = MPAIL("MlpMPPI", make_vec_env(env_id, n_envs=n_envs, seed=seed), seed=seed, device="cpu", **settings)
+    started = time.perf_counter()
+    model.learn(budget)
+    train_seconds = time.perf_counter() - started
+    figures = evaluate_locomotion(model, env_id, n_eval_episodes, EVAL_SEED + seed, n_envs=n_eval_episodes)
+    reference = shipped_demo_info(settings["demos"].rsplit("_", 1)[0])
+    result = dict(
+        env_id=env_id, variant=name, seed=seed, timesteps=budget, n_envs=n_envs, train_seconds=round(train_seconds, 1),
+        score=normalised_score(figures["return"], reference), speed_ratio=figures["forward_speed"] / reference[
+            "expert_forward_speed"], **figures,
+    )  # fmt: skip
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(result))
+    return path
+
+
+def report(results_dir: Path) -> str:
+    """The ``locomotion-ablations`` section: per task, budget and variant, means and 95% CIs over its seeds."""
+    lines = [
+        "## Locomotion ablations: what learned-model MPAIL needs on MuJoCo",
+        "",
+        "Each variant changes one setting of the task's `sb3_mpail/hyperparams/mpail.yml` entry. Every model plays "
+        "deterministic episodes from fixed seeds; score = (R - random) / (expert - random) against the shipped demos' "
+        "information file, speed = forward speed / the expert's. Means ± 95% CI (Student's t) over seeds.",
+    ]
+    for grid in sorted(Path(results_dir).glob("*steps")):
+        runs = [json.loads(path.read_text()) for path in sorted(grid.glob("*_seed*.json"))]
+        if not runs:
+            continue
+        lines += ["", f"### {runs[0]['env_id']}, {runs[0]['timesteps']} env steps", "",
+                  "| variant | what changes | seeds | score | return | forward speed / expert's | episode length | "
+                  "training seconds |", "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        for name in VARIANTS:
+            mine = [run for run in runs if run["variant"] == name]
+            if not mine:
+                continue
+            cells = [format_ci(*mean_ci([run[key] for run in mine])) for key in ("score", "return", "speed_ratio", "length")]
+            cells.append(f"{sum(run['train_seconds'] for run in mine) / len(mine):.0f}")
+            lines.append(f"| `{name}` | {VARIANTS[name]['question']} | {len(mine)} | " + " | ".join(cells) + " |")
+    command = "python -m benchmarks.locomotion_ablations --env <task> --seeds 0 1 2"
+    lines += ["", f"Command: `{command}` on {machine_description()}."]
+    return "\n".join(lines)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--env", default="Hopper-v4", help="a task with an mpail.yml entry (default: Hopper-v4)")
+    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--timesteps", type=int, default=None, help="override the zoo entry's budget (a separate table)")
+    parser.add_argument("--eval-episodes", type=int, default=10, help="deterministic evaluation episodes (default: 10)")
+    parser.add_argument("--workers", type=int, default=1, help="runs trained at once, one torch thread each")
+    parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR)
+    parser.add_argument("--report-only", action="store_true", help="only rewrite the section from stored results")
+    args = parser.parse_args(argv)
+    if not args.report_only:
+        timesteps = args.timesteps or int(zoo_hyperparameters(args.env)["n_timesteps"])
+        out_dir = results_dir_of(args.env, timesteps, args.results_dir)
+        jobs: List[tuple] = [(name, seed) for name in args.variants for seed in args.seeds
+                             if not (out_dir / f"{name}_seed{seed}.json").exists()]  # fmt: skip
+        print(f"{len(jobs)} runs to do", flush=True)
+        with ProcessPoolExecutor(max(1, args.workers), mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = [pool.submit(run_variant, args.env, name, seed, timesteps, args.eval_episodes, out_dir)
+                       for name, seed in jobs]  # fmt: skip
+            for future in futures:
+                print("wrote", future.result(), flush=True)
+    write_section("locomotion-ablations", report(args.results_dir))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,248 @@
+"""
+The policy prior of learned-model MPAIL (MPAIL2's and TD-MPC2's design): a SAC actor and Q ensemble trained
+off-policy, on every transition the agent has made, against the *learned* reward ``d_theta(s, s')``. The planner
+uses it twice: the actor proposes a share of the sampled action sequences (rolled through the planning model), and
+the ensemble's mean ``Q(s_H, pi(s_H))`` replaces the on-policy ``V_phi`` as the terminal value. The networks and
+their optimisers are Stable-Baselines3's :class:`~stable_baselines3.sac.policies.SACPolicy`; the update is SAC's.
+"""
+
+from typing import Any, Callable, Dict, List, Sequence
+
+import numpy as np
+import torch as th
+import torch.nn.functional as F
+from gymnasium import spaces
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.utils import polyak_update
+from stable_baselines3.sac.policies import SACPolicy
+from torch import nn
+
+from sb3_mpail.checks import FRACTION, HIDDEN_SIZES, POSITIVE_INTEGER, POSITIVE_NUMBER, UNIT_INTERVAL, check_arguments
+
+
+class PolicyPrior(nn.Module):
+    """
+    A squashed-Gaussian actor ``pi(a | s)`` and ``n_critics`` Q networks with Polyak targets, trained by SAC with a
+    learned entropy coefficient (target entropy ``-action_dim``). Actions are the env's, mapped to SAC's ``[-1, 1]``.
+
+    :param observation_space: the env's flat ``Box`` observation space
+    :param action_space: the env's bounded ``Box`` action space
+    :param net_arch: hidden widths of the actor and of each Q network
+    :param n_critics: Q networks in the ensemble
+    :param learning_rate: Adam learning rate of actor, critics and entropy coefficient
+    :param gamma: discount of the learned reward in the Q targets
+    :param tau: Polyak coefficient of the target Q networks
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Box,
+        action_space: spaces.Box,
+        net_arch: Sequence[int] = (256, 256),
+        n_critics: int = 2,
+        learning_rate: float = 3e-4,
+        gamma: float = 0.99,
+        tau: float = 0.005,
+    ):
+        super().__init__()
+        check_arguments(
+            net_arch=(net_arch, HIDDEN_SIZES),
+            n_critics=(n_critics, POSITIVE_INTEGER),
+            learning_rate=(learning_rate, POSITIVE_NUMBER),
+            gamma=(gamma, FRACTION),
+            tau=(tau, UNIT_INTERVAL),
+        )
+        self.sac = SACPolicy(
+            observation_space, action_space, lambda _: learning_rate, net_arch=list(net_arch), n_critics=n_critics
+        )
+        self.register_buffer("action_low", th.as_tensor(action_space.low, dtype=th.float32))
+        self.register_buffer("action_high", th.as_tensor(action_space.high, dtype=th.float32))
+        self.log_entropy_coefficient = nn.Parameter(th.zeros(1))
+        self.entropy_optimizer = th.optim.Adam([self.log_entropy_coefficient], lr=learning_rate)
+        self.target_entropy = -float(np.prod(action_space.shape))
+        self.gamma = gamma
+        self.tau = tau
+
+    def to_env_actions(self, unit_actions: th.Tensor) -> th.Tensor:
+        """SAC's ``[-1, 1]`` actions in the env's units."""
+        return self.action_low + (unit_actions + 1.0) * 0.5 * (self.action_high - self.action_low)
+
+    def to_unit_actions(self, actions: np.ndarray) -> np.ndarray:
+        """The env's actions in SAC's ``[-1, 1]`` (what the replay buffer stores)."""
+        low, high = self.action_low.cpu().numpy(), self.action_high.cpu().numpy()
+        return np.clip(2.0 * (actions - low) / (high - low) - 1.0, -1.0, 1.0)
+
+    def sample(self, states: th.Tensor, generator: th.Generator) -> th.Tensor:
+        """
+        Actions drawn from ``pi(a | s)`` with the planner's noise source (so deterministic planning stays a pure
+        function of its inputs), in the env's units.
+
+        :param states: ``(batch, state_dim)``
+        :param generator: the planner's generator
+        """
+        mean, log_std, _ = self.sac.actor.get_action_dist_params(states)
+        noise = th.randn(mean.shape, generator=generator, device=mean.device, dtype=mean.dtype)
+        return self.to_env_actions(th.tanh(mean + log_std.exp() * noise))
+
+    def propose(
+        self, dynamics: Callable[[th.Tensor, th.Tensor], th.Tensor], states: th.Tensor, horizon: int, n_proposals: int,
+        generator: th.Generator,
+    ) -> th.Tensor:
+        """
+        Action sequences of the actor rolled through the planning model from each env's state.
+
+        :param dynamics: the planner's ``f(states, actions) -> next_states``
+        :param states: ``(n_envs, state_dim)``
+        :param horizon: steps per sequence
+        :param n_proposals: sequences per env
+        :param generator: the planner's generator
+        :return: time-major sequences, ``(horizon, n_envs, n_proposals, action_dim)``
+        """
+        n_envs = states.shape[0]
+        current = states.repeat_interleave(n_proposals, dim=0)
+        actions = []
+        for _ in range(horizon):
+            action = self.sample(current, generator)
+            actions.append(action)
+            current = dynamics(current, action)
+        return th.stack(actions).view(horizon, n_envs, n_proposals, -1)
+
+    def value(self, states: th.Tensor) -> th.Tensor:
+        """The ensemble's mean ``Q(s, tanh(mean of pi(s)))`` over any leading shape, ``(*leading)``."""
+        flat = states.reshape(-1, states.shape[-1])
+        mean, _, _ = self.sac.actor.get_action_dist_params(flat)
+        q_values = th.cat(self.sac.critic(flat, th.tanh(mean)), dim=1)
+        return q_values.mean(dim=1).view(states.shape[:-1])
+
+    def update(
+        self, states: th.Tensor, unit_actions: th.Tensor, next_states: th.Tensor, rewards: th.Tensor, dones: th.Tensor
+    ) -> Dict[str, float]:
+        """
+        One SAC update on a replayed minibatch labelled with the current learned reward.
+
+        :param states: ``(batch, state_dim)``
+        :param unit_actions: the actions taken, in ``[-1, 1]``, ``(batch, action_dim)``
+        :param next_states: ``(batch, state_dim)``
+        :param rewards: learned rewards, ``(batch, 1)``
+        :param dones: 1 where the episode terminated (not a time-limit cut), ``(batch, 1)``
+        :return: the losses and the entropy coefficient
+        """
+        actor, critic, critic_target = self.sac.actor, self.sac.critic, self.sac.critic_target
+        new_actions, log_prob = actor.action_log_prob(states)
+        log_prob = log_prob.reshape(-1, 1)
+        entropy_loss = -(self.log_entropy_coefficient * (log_prob + self.target_entropy).detach()).mean()
+        self.entropy_optimizer.zero_grad()
+        entropy_loss.backward()
+        self.entropy_optimizer.step()
+        entropy_coefficient = self.log_entropy_coefficient.detach().exp()
+
+        with th.no_grad():
+            next_actions, next_log_prob = actor.action_log_prob(next_states)
+            next_q = th.cat(critic_target(next_states, next_actions), dim=1).min(dim=1, keepdim=True).values
+            next_q = next_q - entropy_coefficient * next_log_prob.reshape(-1, 1)
+            targets = rewards + (1 - dones) * self.gamma * next_q
+        critic_loss = 0.5 * sum(F.mse_loss(q, targets) for q in critic(states, unit_actions))
+        critic.optimizer.zero_grad()
+        critic_loss.backward()
+        critic.optimizer.step()
+
+        q_new = th.cat(critic(states, new_actions), dim=1).min(dim=1, keepdim=True).values
+        actor_loss = (entropy_coefficient * log_prob - q_new).mean()
+        actor.optimizer.zero_grad()
+        actor_loss.backward()
+        actor.optimizer.step()
+        polyak_update(critic.parameters(), critic_target.parameters(), self.tau)
+        return {
+            "critic_loss": float(critic_loss.item()),
+            "actor_loss": float(actor_loss.item()),
+            "entropy_coefficient": float(entropy_coefficient.item()),
+        }
+
+
+class PriorValue(nn.Module):
+    """The prior's Q ensemble as the planner's terminal value ``V(s)`` (a module, so the policy saves it).
+
+    :param prior: the policy prior
+    """
+
+    def __init__(self, prior: PolicyPrior):
+        super().__init__()
+        self.prior = prior
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        return self.prior.value(states)
+
+
+class PriorReplay:
+    """
+    Every transition the agent has made (SB3's :class:`~stable_baselines3.common.buffers.ReplayBuffer`, time-limit
+    cuts bootstrapped), replayed to train the prior ``updates_per_step`` times per new env step on minibatches
+    labelled with the learned reward of the moment (so old transitions follow the discriminator as it changes).
+
+    :param observation_space: the env's observation space
+    :param action_space: the env's action space
+    :param n_envs: environments stepped together
+    :param buffer_size: transitions kept (the oldest are replaced)
+    :param batch_size: minibatch size of an update
+    :param updates_per_step: prior updates per env step (summed over envs)
+    :param device: where minibatches are put
+    :param use_terminations: zero the next state's value where an episode terminated (e.g. a fall). ``False``
+        (MPAIL2's default) bootstraps through terminations: with a learned reward of either sign, zeroing would make
+        ending an episode attractive wherever the reward is negative
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Box,
+        action_space: spaces.Box,
+        n_envs: int,
+        buffer_size: int,
+        batch_size: int,
+        updates_per_step: float,
+        device: th.device,
+        use_terminations: bool = False,
+    ):
+        self.buffer = ReplayBuffer(
+            max(buffer_size // n_envs, 1),
+            observation_space,
+            action_space,
+            device,
+            n_envs=n_envs,
+            handle_timeout_termination=True,
+        )
+        self.batch_size = batch_size
+        self.updates_per_step = updates_per_step
+        self.use_terminations = use_terminations
+
+    def add(
+        self, prior: PolicyPrior, observations: np.ndarray, next_observations: np.ndarray, actions: np.ndarray,
+        dones: np.ndarray, infos: List[Dict[str, Any]],
+    ) -> None:
+        """Stores one step of every env (``next_observations`` the true successors, terminal ones at episode ends)."""
+        unit_actions = prior.to_unit_actions(actions)
+        self.buffer.add(observations, next_observations, unit_actions, np.zeros(len(dones), np.float32), dones, infos)
+
+    def train(
+        self, prior: PolicyPrior, reward: Callable[[th.Tensor, th.Tensor], th.Tensor], n_new_steps: int
+    ) -> Dict[str, float]:
+        """
+        ``round(updates_per_step * n_new_steps)`` SAC updates of the prior, none before a minibatch is stored.
+
+        :param prior: the prior to train
+        :param reward: the learned reward ``r(s, s')`` on ``(batch, state_dim)`` float32 tensors, ``(batch,)``
+        :param n_new_steps: env steps stored since the last call
+        :return: the mean of each logged figure over the updates (empty when none ran)
+        """
+        if self.buffer.size() * self.buffer.n_envs < self.batch_size:
+            return {}
+        figures: Dict[str, List[float]] = {}
+        for _ in range(round(self.updates_per_step * n_new_steps)):
+            batch = self.buffer.sample(self.batch_size)
+            states, next_states = batch.observations.float(), batch.next_observations.float()
+            with th.no_grad():
+                rewards = reward(states, next_states).reshape(-1, 1)
+            dones = batch.dones.float() if self.use_terminations else th.zeros_like(rewards)
+            update = prior.update(states, batch.actions.float(), next_states, rewards, dones)
+            for name, value in {**update, "reward": float(rewards.mean())}.items():
+                figures.setdefault(name, []).append(value)
+        return {name: float(np.mean(values)) for name, values in figures.items()}

@@ -1,0 +1,121 @@
+"""The policy prior of learned-model MPAIL: its proposals join MPPI's samples, its Q ensemble is the value, SAC trains it."""
+
+import numpy as np
+import pytest
+import torch as th
+from gymnasium import spaces
+from test_mpail import make_model, pendulum_trajectories
+
+from sb3_mpail import MPAIL
+from sb3_mpail.prior import PolicyPrior, PriorReplay, PriorValue
+
+PRIOR_PLANNER = dict(
+    dynamics="learned",
+    dynamics_kwargs=dict(hidden_sizes=(16,), n_epochs=1),
+    n_samples=16,
+    horizon=3,
+    n_iterations=2,
+    policy_prior=True,
+    n_proposals=4,
+    prior_kwargs=dict(net_arch=(16, 16)),
+)
+
+
+@pytest.fixture(scope="module")
+def demos():
+    return pendulum_trajectories()
+
+
+def prior_model(demos, **kwargs):
+    return make_model(demos, n_envs=2, policy_kwargs=dict(PRIOR_PLANNER), discriminator_update_interval=1, **kwargs)
+
+
+def test_the_priors_proposals_join_every_iterations_samples_inside_the_bounds(demos):
+    model = prior_model(demos)
+    observations = th.as_tensor(model.env.reset(), dtype=th.float32)
+    last = model.policy.planner.optimise(observations, model.policy.initial_plan(2), th.tensor(1.0), th.Generator())
+    assert last.samples.shape == (3, 2, 16 + 4, 1)
+    proposals = last.samples[:, :, 16:]
+    assert (proposals >= -2.0).all() and (proposals <= 2.0).all()
+    assert not th.equal(proposals, last.samples[:, :, :4])  # drawn by the actor, not the sampler
+
+
+def test_the_priors_q_ensemble_is_the_planners_value_over_any_leading_shape(demos):
+    model = prior_model(demos)
+    assert isinstance(model.policy.planner.terminal_value, PriorValue)
+    states = th.randn(5, 2, 7, 3)
+    values = model.policy.planner.terminal_value(states)
+    assert values.shape == (5, 2, 7)
+    np.testing.assert_allclose(values[1, 0].detach(), model.policy.prior.value(states[1, 0]).detach(), rtol=1e-6)
+
+
+def test_sac_updates_fit_the_q_ensemble_to_the_learned_reward():
+    prior = PolicyPrior(spaces.Box(-1, 1, (2,)), spaces.Box(-1, 1, (1,)), net_arch=(32,), learning_rate=1e-2)
+    generator = th.Generator().manual_seed(0)
+    states = th.randn(64, 2, generator=generator)
+    actions = th.rand(64, 1, generator=generator) * 2 - 1
+    rewards = states[:, :1] * 2.0  # terminal transitions: Q(s, a) should become r(s)
+    dones = th.ones(64, 1)
+    before = th.stack([q.detach() for q in prior.sac.critic(states, actions)])
+    for _ in range(300):
+        prior.update(states, actions, states, rewards, dones)
+    after = th.stack([q.detach() for q in prior.sac.critic(states, actions)])
+    assert (after - rewards).abs().mean() < 0.2 < (before - rewards).abs().mean()
+
+
+def test_learning_with_a_prior_trains_it_off_policy_on_every_transition_and_not_the_on_policy_value(demos):
+    model = prior_model(demos, prior_batch_size=8)
+    prior = [p.detach().clone() for p in model.policy.prior.parameters()]
+    value = [p.detach().clone() for p in model.policy.value_net.parameters()]
+    model.learn(64)
+    assert model.prior_replay is not None and model.prior_replay.buffer.size() * 2 == 64  # every step of both envs
+    assert not all(th.equal(before, after) for before, after in zip(prior, model.policy.prior.parameters()))
+    assert all(th.equal(before, after) for before, after in zip(value, model.policy.value_net.parameters()))
+
+
+def test_a_seeded_run_with_a_prior_is_reproducible_and_its_reloaded_copy_plans_the_same(demos, tmp_path):
+    first, second = (prior_model(demos, prior_batch_size=8).learn(48) for _ in range(2))
+    observations = first.env.reset()
+    actions = first.predict(observations, deterministic=True)[0]
+    np.testing.assert_array_equal(actions, second.predict(observations, deterministic=True)[0])
+    first.save(tmp_path / "prior")
+    loaded = MPAIL.load(tmp_path / "prior")
+    np.testing.assert_array_equal(actions, loaded.predict(observations, deterministic=True)[0])
+    first.predict(observations)  # a stochastic call in between changes nothing deterministic
+    np.testing.assert_array_equal(actions, first.predict(observations, deterministic=True)[0])
+
+
+class RecordingPrior(PolicyPrior):
+    """A prior that records the termination flags its updates are given."""
+
+    def update(self, states, unit_actions, next_states, rewards, dones):
+        self.dones_seen = dones
+        return {}
+
+
+@pytest.mark.parametrize("use_terminations", [False, True])
+def test_the_priors_targets_bootstrap_through_terminations_unless_asked_not_to(use_terminations):
+    observation_space, action_space = spaces.Box(-1, 1, (2,)), spaces.Box(-1, 1, (1,))
+    prior = RecordingPrior(observation_space, action_space, net_arch=(4,))
+    replay = PriorReplay(observation_space, action_space, 1, 16, 4, 1.0, th.device("cpu"), use_terminations)
+    for _ in range(4):  # every stored step ends an episode by termination (a fall), not by the time limit
+        replay.add(prior, np.zeros((1, 2)), np.ones((1, 2)), np.zeros((1, 1)), np.ones(1, bool), [{}])
+    replay.train(prior, lambda states, next_states: states.sum(1), n_new_steps=1)
+    assert prior.dones_seen.tolist() == [[float(use_terminations)]] * 4
+
+
+@pytest.mark.parametrize(
+    "policy_kwargs, settings, named",
+    [
+        (dict(prior_kwargs=dict(n_critics=0)), {}, "n_critics"),
+        (dict(prior_kwargs=dict(tau=1.5)), {}, "tau"),
+        (dict(n_proposals=-1), {}, "n_proposals"),
+        (dict(policy_prior="yes"), {}, "policy_prior"),
+        ({}, dict(prior_updates_per_step=-1), "prior_updates_per_step"),
+        ({}, dict(prior_batch_size=0), "prior_batch_size"),
+        ({}, dict(prior_use_terminations="no"), "prior_use_terminations"),
+    ],
+)
+def test_bad_prior_settings_are_refused_naming_them(demos, policy_kwargs, settings, named):
+    with pytest.raises(ValueError, match=named):
+        make_model(demos, policy_kwargs={**PRIOR_PLANNER, **policy_kwargs}, **settings)
