@@ -13,7 +13,6 @@ import torch as th
 import torch.nn.functional as F
 from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
-from stable_baselines3.common.utils import polyak_update
 from stable_baselines3.sac.policies import SACPolicy
 from torch import nn
 
@@ -53,12 +52,17 @@ class PolicyPrior(nn.Module):
             tau=(tau, UNIT_INTERVAL),
         )
         self.sac = SACPolicy(
-            observation_space, action_space, lambda _: learning_rate, net_arch=list(net_arch), n_critics=n_critics
+            observation_space,
+            action_space,
+            lambda _: learning_rate,
+            net_arch=list(net_arch),
+            n_critics=n_critics,
+            optimizer_kwargs=dict(foreach=True),  # one fused step over all parameters: small networks are overhead-bound
         )
         self.register_buffer("action_low", th.as_tensor(action_space.low, dtype=th.float32))
         self.register_buffer("action_high", th.as_tensor(action_space.high, dtype=th.float32))
         self.log_entropy_coefficient = nn.Parameter(th.zeros(1))
-        self.entropy_optimizer = th.optim.Adam([self.log_entropy_coefficient], lr=learning_rate)
+        self.entropy_optimizer = th.optim.Adam([self.log_entropy_coefficient], lr=learning_rate, foreach=True)
         self.target_entropy = -float(np.prod(action_space.shape))
         self.gamma = gamma
         self.tau = tau
@@ -151,7 +155,9 @@ class PolicyPrior(nn.Module):
         actor.optimizer.zero_grad()
         actor_loss.backward()
         actor.optimizer.step()
-        polyak_update(critic.parameters(), critic_target.parameters(), self.tau)
+        with th.no_grad():  # SB3's polyak_update without its per-call checks, which took 2 ms of it here (0.1-0.2 ms)
+            for target, online in zip(critic_target.parameters(), critic.parameters()):
+                target.lerp_(online, self.tau)
         return {
             "critic_loss": float(critic_loss.item()),
             "actor_loss": float(actor_loss.item()),
