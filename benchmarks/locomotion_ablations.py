@@ -42,6 +42,10 @@ EVAL_SEED = 20_000
 #: every variant: what the row tests, and its changes to the zoo entry (``policy_kwargs`` merged key by key)
 VARIANTS: Dict[str, Dict[str, Any]] = {
     "defaults": dict(question="the task's zoo entry", changes={}),
+    "with-prior": dict(
+        question="the Hopper entry's policy prior added (16 proposals, half an update per env step)",
+        changes=dict(prior_updates_per_step=0.5, policy_kwargs=dict(policy_prior=True, n_proposals=16)),
+    ),
     "no-prior": dict(
         question="the paper's learned-model MPAIL: no policy prior, on-policy GAE value",
         changes=dict(policy_kwargs=dict(policy_prior=False)),
@@ -50,8 +54,9 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         question="the prior's Q ensemble as the value, but no proposals from its actor",
         changes=dict(policy_kwargs=dict(n_proposals=0)),
     ),
-    "prior-terminations": dict(
-        question="the prior's Q targets stop at terminations (falls)", changes=dict(prior_use_terminations=True)
+    "prior-bootstraps-terminations": dict(
+        question="the prior's Q targets bootstrap through terminations (MPAIL2's default)",
+        changes=dict(prior_use_terminations=False),
     ),
     "prior-updates-1": dict(question="one prior update per env step", changes=dict(prior_updates_per_step=1.0)),
     "discriminator-replay": dict(

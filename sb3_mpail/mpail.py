@@ -104,8 +104,8 @@ class MPAIL(BaseAlgorithm):
     :param prior_buffer_size: transitions the policy prior's replay keeps (with ``policy_kwargs=dict(policy_prior=True)``)
     :param prior_batch_size: minibatch size of the prior's SAC updates
     :param prior_updates_per_step: SAC updates of the prior per env step (summed over envs), run after each rollout
-    :param prior_use_terminations: the prior's Q targets stop at terminations (e.g. a fall); ``False`` (MPAIL2's
-        default) bootstraps through them, so that a negative learned reward does not make ending episodes attractive
+    :param prior_use_terminations: the prior's Q targets stop at terminations (e.g. a fall), as SAC's do; ``False``
+        bootstraps through them (MPAIL2's default), which let the Ant fall in most episodes here
     :param stats_window_size: episodes averaged in the logged episode return
     :param tensorboard_log: tensorboard log folder
     :param policy_kwargs: keyword arguments of the policy (planner settings, ``dynamics``)
@@ -148,7 +148,7 @@ class MPAIL(BaseAlgorithm):
         prior_buffer_size: int = 1_000_000,
         prior_batch_size: int = 256,
         prior_updates_per_step: float = 1.0,
-        prior_use_terminations: bool = False,
+        prior_use_terminations: bool = True,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         policy_kwargs: Dict[str, Any] | None = None,

@@ -192,9 +192,8 @@ class PriorReplay:
     :param batch_size: minibatch size of an update
     :param updates_per_step: prior updates per env step (summed over envs)
     :param device: where minibatches are put
-    :param use_terminations: zero the next state's value where an episode terminated (e.g. a fall). ``False``
-        (MPAIL2's default) bootstraps through terminations: with a learned reward of either sign, zeroing would make
-        ending an episode attractive wherever the reward is negative
+    :param use_terminations: zero the next state's value where an episode terminated (e.g. a fall), as SAC does;
+        ``False`` bootstraps through terminations (MPAIL2's default)
     """
 
     def __init__(
@@ -206,7 +205,7 @@ class PriorReplay:
         batch_size: int,
         updates_per_step: float,
         device: th.device,
-        use_terminations: bool = False,
+        use_terminations: bool = True,
     ):
         self.buffer = ReplayBuffer(
             max(buffer_size // n_envs, 1),

@@ -94,7 +94,7 @@ class RecordingPrior(PolicyPrior):
 
 
 @pytest.mark.parametrize("use_terminations", [False, True])
-def test_the_priors_targets_bootstrap_through_terminations_unless_asked_not_to(use_terminations):
+def test_the_priors_targets_stop_at_terminations_unless_told_to_bootstrap_through_them(use_terminations):
     observation_space, action_space = spaces.Box(-1, 1, (2,)), spaces.Box(-1, 1, (1,))
     prior = RecordingPrior(observation_space, action_space, net_arch=(4,))
     replay = PriorReplay(observation_space, action_space, 1, 16, 4, 1.0, th.device("cpu"), use_terminations)
