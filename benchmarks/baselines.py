@@ -219,6 +219,10 @@ def action_transitions(path: Path | str) -> types.Transitions:
         )
     with np.load(labelled) as data:
         observations, actions = data["obs"], data["acts"]
+        if "episode_lengths" in data:  # episodes of several lengths, concatenated: T_i + 1 observations, T_i actions
+            ends = np.cumsum(data["episode_lengths"])
+            observations = np.split(observations, ends[:-1])
+            actions = np.split(actions, (ends - np.arange(1, len(ends) + 1))[:-1])
     trajectories = [types.Trajectory(obs=o, acts=a, infos=None, terminal=True) for o, a in zip(observations, actions)]
     return rollout.flatten_trajectories(trajectories)
 
@@ -726,35 +730,38 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
     sizes = [int(n) for family, n in (shipped.rsplit("_", 1) for shipped in list_shipped_demos()) if family == name]
     if not sizes:
         raise FileNotFoundError(f"No {name}_<n> demo set is shipped ({', '.join(list_shipped_demos())}).")
-    demos = np.stack([trajectory.obs for trajectory in shipped_demos(name, max(sizes))])
-    if env_id in LOCOMOTION_TASKS:  # the TD3 expert demos/make_mujoco_demos.py saved, from the demos' start seeds
-        td3 = TD3.load(expert_path, device="cpu")
-        seed_offset = _demo_script("expert_rollouts").DEMO_SEED_OFFSET
-        replays = [_replay(gym_env, lambda obs: td3.predict(obs, deterministic=True)[0], seed_offset + i, demos.shape[1] - 1)
-                   for i in range(len(demos))]  # fmt: skip
-        reproduced, actions = np.stack([obs for obs, _ in replays]), np.stack([acts for _, acts in replays])
-    elif name == "navigation":
-        script = _demo_script("make_navigation_demos")
-        expert = script.make_expert_policy(PPO.load(expert_path or "/tmp/navigation_expert_ppo.zip", device="cpu"), gym_env)
-        replays = [_replay(gym_env, expert, script.DEMO_SEED_BASE + i, demos.shape[1] - 1) for i in range(len(demos))]
-        reproduced, actions = np.stack([obs for obs, _ in replays]), np.stack([acts for _, acts in replays])
+    episodes = [trajectory.obs for trajectory in shipped_demos(name, max(sizes))]
+    if env_id in LOCOMOTION_TASKS or name == "navigation":  # replay the saved expert from the demos' start seeds
+        if env_id in LOCOMOTION_TASKS:  # the TD3 expert of demos/make_mujoco_demos.py --save-expert
+            td3 = TD3.load(expert_path, device="cpu")
+            expert = lambda obs: td3.predict(obs, deterministic=True)[0]  # noqa: E731
+            seed_offset = _demo_script("expert_rollouts").DEMO_SEED_OFFSET
+        else:
+            script = _demo_script("make_navigation_demos")
+            ppo = PPO.load(expert_path or "/tmp/navigation_expert_ppo.zip", device="cpu")
+            expert, seed_offset = script.make_expert_policy(ppo, gym_env), script.DEMO_SEED_BASE
+        replays = [_replay(gym_env, expert, seed_offset + i, len(episode) - 1) for i, episode in enumerate(episodes)]
+        reproduced, actions = [obs for obs, _ in replays], [acts for _, acts in replays]
     elif name in INVERSE_DYNAMICS:
         # both are unstable upright, so float32 actions replayed open loop drift: check each step instead
         recover, model = INVERSE_DYNAMICS[name]
-        actions = np.stack([recover(observations) for observations in demos])
-        states = th.as_tensor(demos[:, :-1]).reshape(-1, demos.shape[-1])
-        next_states = model(states, th.as_tensor(actions).reshape(-1, actions.shape[-1])).reshape(demos[:, 1:].shape)
-        reproduced = np.concatenate([demos[:, :1], next_states.numpy()], axis=1)
+        actions = [recover(observations) for observations in episodes]
+        reproduced = [np.concatenate([observations[:1], model(th.as_tensor(observations[:-1]), th.as_tensor(acts)).numpy()])
+                      for observations, acts in zip(episodes, actions)]  # fmt: skip
     else:
         raise ValueError(f"No action labels known for {env!r}.")
-    if not np.allclose(reproduced, demos, atol=1e-4):
-        raise RuntimeError(
-            f"The actions do not reproduce {name}_{max(sizes)} (max error {np.abs(reproduced - demos).max()})."
-        )
+    if not all(np.allclose(replayed, episode, atol=1e-4) for replayed, episode in zip(reproduced, episodes)):
+        error = max(float(np.abs(replayed - episode).max()) for replayed, episode in zip(reproduced, episodes))
+        raise RuntimeError(f"The actions do not reproduce {name}_{max(sizes)} (max error {error}).")
     written = []
     for n in sorted(sizes):
         written.append(action_demos_path(f"{name}_{n}", out_dir))
-        np.savez_compressed(written[-1], obs=demos[:n], acts=actions[:n])
+        lengths = [len(episode) for episode in episodes[:n]]
+        if len(set(lengths)) == 1:
+            np.savez_compressed(written[-1], obs=np.stack(episodes[:n]), acts=np.stack(actions[:n]))
+        else:  # episodes of several lengths (an expert's falls), concatenated as the shipped demos store them
+            np.savez_compressed(written[-1], obs=np.concatenate(episodes[:n]), acts=np.concatenate(actions[:n]),
+                                episode_lengths=np.asarray(lengths))  # fmt: skip
     return written
 
 

@@ -19,6 +19,7 @@ Usage::
 import argparse
 import json
 import multiprocessing
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -78,9 +79,13 @@ def results_dir_of(env_id: str, timesteps: int, results_dir: Path = RESULTS_DIR)
     return Path(results_dir) / f"{env_id.split('/')[-1]}_{timesteps}steps"
 
 
-def run_variant(env_id: str, name: str, seed: int, timesteps: Optional[int], n_eval_episodes: int, out_dir: Path) -> Path:
+def run_variant(
+    env_id: str, name: str, seed: int, timesteps: Optional[int], n_eval_episodes: int, out_dir: Path, command: str
+) -> Path:
     """
     Trains one variant on one seed, evaluates it and writes its result (skipped when the file exists).
+
+    :param command: the command line that asked for it, quoted by the report
 
     :return: the result file
     """
@@ -99,6 +104,7 @@ def run_variant(env_id: str, name: str, seed: int, timesteps: Optional[int], n_e
     reference = shipped_demo_info(settings["demos"].rsplit("_", 1)[0])
     result = dict(
         env_id=env_id, variant=name, seed=seed, timesteps=budget, n_envs=n_envs, train_seconds=round(train_seconds, 1),
+        n_eval_episodes=n_eval_episodes, command=command,
         score=normalised_score(figures["return"], reference), speed_ratio=figures["forward_speed"] / reference[
             "expert_forward_speed"], **figures,
     )  # fmt: skip
@@ -120,7 +126,10 @@ def report(results_dir: Path) -> str:
         runs = [json.loads(path.read_text()) for path in sorted(grid.glob("*_seed*.json"))]
         if not runs:
             continue
+        commands = sorted({run.get("command", "") for run in runs})
         lines += ["", f"### {runs[0]['env_id']}, {runs[0]['timesteps']} env steps", "",
+                  f"{runs[0]['n_eval_episodes']} evaluation episodes per run. Commands: "
+                  + "; ".join(f"`{command}`" for command in commands), "",
                   "| variant | what changes | seeds | score | return | forward speed / expert's | episode length | "
                   "training seconds |", "|---|---|---|---|---|---|---|---|"]  # fmt: skip
         for name in VARIANTS:
@@ -130,8 +139,7 @@ def report(results_dir: Path) -> str:
             cells = [format_ci(*mean_ci([run[key] for run in mine])) for key in ("score", "return", "speed_ratio", "length")]
             cells.append(f"{sum(run['train_seconds'] for run in mine) / len(mine):.0f}")
             lines.append(f"| `{name}` | {VARIANTS[name]['question']} | {len(mine)} | " + " | ".join(cells) + " |")
-    command = "python -m benchmarks.locomotion_ablations --env <task> --seeds 0 1 2"
-    lines += ["", f"Command: `{command}` on {machine_description()}."]
+    lines += ["", f"On {machine_description()} (each run on one torch thread)."]
     return "\n".join(lines)
 
 
@@ -153,10 +161,12 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
                              if not (out_dir / f"{name}_seed{seed}.json").exists()]  # fmt: skip
         print(f"{len(jobs)} runs to do", flush=True)
         with ProcessPoolExecutor(max(1, args.workers), mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = [pool.submit(run_variant, args.env, name, seed, timesteps, args.eval_episodes, out_dir)
+            command = "python -m benchmarks.locomotion_ablations " + " ".join(argv if argv is not None else sys.argv[1:])
+            futures = [pool.submit(run_variant, args.env, name, seed, timesteps, args.eval_episodes, out_dir, command)
                        for name, seed in jobs]  # fmt: skip
             for future in futures:
                 print("wrote", future.result(), flush=True)
+    th.set_num_threads(1)  # the runs' setting, quoted in the report
     write_section("locomotion-ablations", report(args.results_dir))
 
 

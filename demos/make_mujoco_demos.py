@@ -58,6 +58,8 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     parser.add_argument("--out-dir", type=Path, default=SHIPPED_DEMO_DIR, help="folder for the .npz and .json files")
     parser.add_argument("--n-demos", type=int, default=16, help="number of demonstrations to record (default: 16)")
+    parser.add_argument("--resume", type=Path, default=None, help="go on training an expert saved by --save-expert")
+    parser.add_argument("--batch-warmup", type=int, default=1_000, help="with --resume: random steps stored before updates")
     parser.add_argument("--save-expert", type=Path, default=None, help="where to save the expert (not shipped)")
     return parser.parse_args()
 
@@ -103,23 +105,25 @@ def main() -> None:
 
     env = gym.make(args.env)
     n_actions = env.action_space.shape[0]
-    model = TD3(
-        "MlpPolicy",
-        env,
+    settings: dict[str, Any] = dict(
         learning_starts=10_000,
         action_noise=NormalActionNoise(np.zeros(n_actions), 0.1 * np.ones(n_actions)),
         learning_rate=3e-4,
         batch_size=256,
         train_freq=1,
         gradient_steps=1,
-        policy_kwargs=dict(net_arch=[256, 256]),
         seed=args.seed,
         device="cpu",
     )
+    if args.resume is None:
+        model = TD3("MlpPolicy", env, policy_kwargs=dict(net_arch=[256, 256]), **settings)
+    else:  # the saved networks go on learning; their replay buffer was not saved: it refills before updates resume
+        model = TD3.load(args.resume, env, **settings)
+        model.learning_starts = model.num_timesteps + args.batch_warmup
     keep_best = KeepBest(args.env, args.eval_freq, args.n_eval_checkpoint, args.seed + 3,
                          None if args.max_minutes is None else 60 * args.max_minutes)
     start = time.perf_counter()
-    model.learn(total_timesteps=args.timesteps, callback=keep_best)
+    model.learn(total_timesteps=args.timesteps, callback=keep_best, reset_num_timesteps=args.resume is None)
     train_seconds = time.perf_counter() - start
     if keep_best.best_state is not None:
         model.policy.load_state_dict(keep_best.best_state)
@@ -142,6 +146,7 @@ def main() -> None:
         "env_id": args.env,
         "expert_algo": "TD3",
         "expert_timesteps": model.num_timesteps,
+        "resumed_from": None if args.resume is None else str(args.resume),
         "expert_checkpoint_timesteps": keep_best.best_step,
         "seed": args.seed,
         "expert_return_mean": expert_mean,
