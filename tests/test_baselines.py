@@ -105,16 +105,25 @@ def test_action_demos_match_the_shipped_observation_only_demos(tmp_path):
     assert {"navigation_1", "navigation_4", "navigation_16", "pendulum_4", "cartpole_4"} <= set(labelled_sets)
     for name in labelled_sets:
         family, n_demos = name.rsplit("_", 1)
+        episodes = [trajectory.obs for trajectory in shipped_demos(family, int(n_demos))]
         with np.load(action_demos_path(name)) as labelled:
-            shipped = np.stack([trajectory.obs for trajectory in shipped_demos(family, int(n_demos))])
-            np.testing.assert_array_equal(labelled["obs"], shipped)
-            assert labelled["acts"].shape[:2] == (labelled["obs"].shape[0], labelled["obs"].shape[1] - 1)
+            if "episode_lengths" in labelled:  # episodes of several lengths, concatenated
+                np.testing.assert_array_equal(labelled["obs"], np.concatenate(episodes))
+                assert labelled["episode_lengths"].tolist() == [len(episode) for episode in episodes]
+                assert len(labelled["acts"]) == len(labelled["obs"]) - len(episodes)
+            else:
+                np.testing.assert_array_equal(labelled["obs"], np.stack(episodes))
+                assert labelled["acts"].shape[:2] == (labelled["obs"].shape[0], labelled["obs"].shape[1] - 1)
     for env in ("pendulum", "cartpole"):  # their labels need no expert: remade from the demos
         (written,) = make_action_demos(env, out_dir=tmp_path)
         assert written == tmp_path / f"{env}_4_actions.npz"
         np.testing.assert_allclose(np.load(written)["acts"], np.load(ACTION_DEMO_DIR / f"{env}_4_actions.npz")["acts"])
     transitions = action_transitions("navigation_4")
     assert len(transitions) == 400 and np.abs(transitions.acts).sum() > 0
+    hopper = action_transitions("hopper_16")  # episodes of several lengths: each step's action, no cross-episode pair
+    episodes = [trajectory.obs for trajectory in shipped_demos("hopper", 16)]
+    assert len(hopper) == sum(len(episode) - 1 for episode in episodes)
+    np.testing.assert_array_equal(hopper.next_obs[: len(episodes[0]) - 1], episodes[0][1:])
 
 
 def test_observation_only_transitions_pair_consecutive_states():

@@ -24,7 +24,6 @@ from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
 
 from sb3_mpail.checks import HIDDEN_SIZES, POSITIVE_INTEGER, check_arguments
-from sb3_mpail.mppi.fused import RELU, FrozenMlp, Workspace, mlp_layers
 
 DynamicsFunction = Callable[[th.Tensor, th.Tensor], th.Tensor]
 
@@ -551,8 +550,8 @@ class LearnedDynamics(nn.Module):
         :meth:`forward` over whole sequences (the planner's path without gradients): the input and output
         normalisations are folded into the first and last layers, the first layer is split into its state and action
         parts, and the action part of every step is one matrix product before the roll-out; each step then adds the
-        state part in place, and the later layers run as the fused cost views' do (oneDNN with bias and ReLU fused on
-        large batches), the new states written into preallocated storage.
+        state part in place, and writes the new states into preallocated storage (plain products, which
+        ``torch.compile`` traces as one graph).
 
         :param initial_states: ``(n_envs, state_dim)``
         :param actions: time-major sequences, ``(horizon, n_envs, n_samples, action_dim)``
@@ -567,18 +566,15 @@ class LearnedDynamics(nn.Module):
         layers[-1] = (weight * self.delta_std.unsqueeze(1), bias * self.delta_std + self.delta_mean)
         (first_weight, first_bias), later = layers[0], layers[1:]
         state_weight, action_weight = first_weight[:, : self.state_dim].t(), first_weight[:, self.state_dim :].t()
-        later_layers = FrozenMlp([weight.t() for weight, _ in later], [bias for _, bias in later],
-                                 [RELU] * (len(later) - 1) + [None])  # fmt: skip
         first_layers = th.addmm(first_bias, actions.reshape(-1, action_dim), action_weight)  # every step's action part
         first_layers = first_layers.view(horizon, n_envs * n_samples, -1)
         states = actions.new_empty(horizon + 1, n_envs, n_samples, self.state_dim)
         states[0] = initial_states.unsqueeze(1)
         current = states[0].view(n_envs * n_samples, self.state_dim)
-        workspace = Workspace()
         for step in range(horizon):
             hidden = first_layers[step].addmm_(current, state_weight)
-            if later:
-                hidden = mlp_layers(later_layers, hidden.relu_(), 0, len(later), workspace)
+            for weight, bias in later:
+                hidden = th.addmm(bias, hidden.relu_(), weight.t())
             following = states[step + 1].view(n_envs * n_samples, self.state_dim)
             th.add(current, hidden, out=following)
             current = following

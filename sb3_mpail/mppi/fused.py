@@ -146,13 +146,9 @@ class Activation:
     onednn_scalars: Tuple[float, ...] = ()
 
 
-#: ReLU in the fast paths' two forms
-RELU = Activation(th.relu_, "relu")
-
-
 def _activation(module: nn.Module) -> Optional[Activation]:
     if isinstance(module, nn.ReLU):
-        return RELU
+        return Activation(th.relu_, "relu")
     if isinstance(module, nn.LeakyReLU):
         return Activation(partial(F.leaky_relu_, negative_slope=module.negative_slope), "leaky_relu", (module.negative_slope,))
     if isinstance(module, nn.Tanh):
@@ -221,7 +217,7 @@ def _held_inputs(
     return native.hold(held_dims, initial_states, pairs) if native is not None and held_dims else None
 
 
-def mlp_layers(mlp: FrozenMlp, hidden: th.Tensor, first_layer: int, last_layer: int, workspace: Workspace) -> th.Tensor:
+def _hidden_layers(mlp: FrozenMlp, hidden: th.Tensor, first_layer: int, last_layer: int, workspace: Workspace) -> th.Tensor:
     """
     Layers ``first_layer .. last_layer - 1`` of ``mlp`` on 2-D ``hidden``: one oneDNN call per layer with bias and
     activation fused on contiguous CPU float32 rows, ``ONEDNN_MIN_ROWS_PER_THREAD`` or more per thread (each call
@@ -334,7 +330,7 @@ class FusedTransitionCost:
         else:
             if mlp.activations[0] is not None:
                 mlp.activations[0].apply_(hidden)
-            hidden = mlp_layers(mlp, hidden, 1, n_layers - 1, workspace)
+            hidden = _hidden_layers(mlp, hidden, 1, n_layers - 1, workspace)
             logits = th.mv(hidden, self.output_weight, out=workspace.get("logits", (rows,), states))
         out.addmv_(logits.view(steps, columns).t(), negative_markups)
 
@@ -372,7 +368,7 @@ class FusedValue:
         rows_per_chunk = chunk_rows()
         for start in range(0, rows, rows_per_chunk):
             stop = min(start + rows_per_chunk, rows)
-            hidden = mlp_layers(mlp, flat_states[start:stop], 0, len(mlp.weights) - 1, workspace)
+            hidden = _hidden_layers(mlp, flat_states[start:stop], 0, len(mlp.weights) - 1, workspace)
             th.addmv(mlp.biases[-1], hidden, mlp.weights[-1][:, 0], out=values[start:stop])
         return values.view(states.shape[:-1])
 
