@@ -73,8 +73,7 @@ class PolicyPrior(nn.Module):
 
     def to_unit_actions(self, actions: np.ndarray) -> np.ndarray:
         """The env's actions in SAC's ``[-1, 1]`` (what the replay buffer stores)."""
-        low, high = self.action_low.cpu().numpy(), self.action_high.cpu().numpy()
-        return np.clip(2.0 * (actions - low) / (high - low) - 1.0, -1.0, 1.0)
+        return np.clip(self.sac.scale_action(actions), -1.0, 1.0)
 
     def sample(self, states: th.Tensor, generator: th.Generator) -> th.Tensor:
         """
