@@ -149,7 +149,7 @@ class PolicyPrior(nn.Module):
         critic_loss.backward()
         critic.optimizer.step()
 
-        critic.requires_grad_(False)  # the actor's loss needs no critic weight gradients: a third of its backward
+        critic.requires_grad_(False)  # the actor's loss needs no critic weight gradients (they were discarded)
         q_new = th.cat(critic(states, new_actions), dim=1).min(dim=1, keepdim=True).values
         actor_loss = (entropy_coefficient * log_prob - q_new).mean()
         actor.optimizer.zero_grad()
