@@ -60,6 +60,10 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         changes=dict(prior_use_terminations=False),
     ),
     "prior-updates-1": dict(question="one prior update per env step", changes=dict(prior_updates_per_step=1.0)),
+    "prior-128": dict(
+        question="the prior's actor and Q networks 128 x 128 instead of 256 x 256 (an update takes 0.6x the time)",
+        changes=dict(policy_kwargs=dict(prior_kwargs=dict(net_arch=(128, 128)))),
+    ),
     "discriminator-replay": dict(
         question="the discriminator also sees the last 50,000 agent transitions",
         changes=dict(discriminator_replay_size=50_000),
