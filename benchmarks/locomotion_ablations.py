@@ -28,7 +28,7 @@ from typing import Any, Dict, List, Optional, Sequence
 import torch as th
 from stable_baselines3.common.env_util import make_vec_env
 
-from benchmarks.report import machine_description, write_section
+from benchmarks.report import machine_description, machines_of, write_section
 from benchmarks.runner import format_ci, mean_ci
 from benchmarks.scenarios import zoo_hyperparameters
 from sb3_mpail import MPAIL
@@ -108,7 +108,7 @@ def run_variant(
     reference = shipped_demo_info(settings["demos"].rsplit("_", 1)[0])
     result = dict(
         env_id=env_id, variant=name, seed=seed, timesteps=budget, n_envs=n_envs, train_seconds=round(train_seconds, 1),
-        n_eval_episodes=n_eval_episodes, command=command,
+        n_eval_episodes=n_eval_episodes, command=command, machine=machine_description(),
         score=normalised_score(figures["return"], reference), speed_ratio=figures["forward_speed"] / reference[
             "expert_forward_speed"], **figures,
     )  # fmt: skip
@@ -132,7 +132,7 @@ def report(results_dir: Path) -> str:
             continue
         commands = sorted({run.get("command", "") for run in runs})
         lines += ["", f"### {runs[0]['env_id']}, {runs[0]['timesteps']} env steps", "",
-                  f"{runs[0]['n_eval_episodes']} evaluation episodes per run. Commands: "
+                  f"{runs[0]['n_eval_episodes']} evaluation episodes per run, on {machines_of(runs)}. Commands: "
                   + "; ".join(f"`{command}`" for command in commands), "",
                   "| variant | what changes | seeds | score | return | forward speed / expert's | episode length | "
                   "training seconds |", "|---|---|---|---|---|---|---|---|"]  # fmt: skip
@@ -143,7 +143,7 @@ def report(results_dir: Path) -> str:
             cells = [format_ci(*mean_ci([run[key] for run in mine])) for key in ("score", "return", "speed_ratio", "length")]
             cells.append(f"{sum(run['train_seconds'] for run in mine) / len(mine):.0f}")
             lines.append(f"| `{name}` | {VARIANTS[name]['question']} | {len(mine)} | " + " | ".join(cells) + " |")
-    lines += ["", f"On {machine_description()} (each run on one torch thread)."]
+    lines += ["", "Each run on one torch thread."]
     return "\n".join(lines)
 
 

@@ -31,16 +31,19 @@ import numpy as np
 import torch as th
 from torch import nn
 
-from benchmarks.report import machine_description, write_section
+from benchmarks.report import machine_description, machines_of, write_section
 from benchmarks.runner import (
     CIRCLING_YAW_RATE,
     GOAL_RADIUS,
     OOD_SEED,
+    TRUE_REWARD_LABEL,
+    TRUE_REWARD_NOTE,
     format_ci,
     mean_ci,
     ood_episodes,
     ood_measures,
     ood_record,
+    true_reward_record,
 )
 from sb3_mpail.demos import shipped_demos
 from sb3_mpail.evaluation import evaluate_episodes, normalised_score
@@ -208,7 +211,7 @@ def run_variant(name: str, seed: int, results_dir: Path = RESULTS_DIR, models_di
     result = dict(
         variant=name, seed=seed, question=variant.question, counts=variant.counts, demos=variant.demos,
         timesteps=variant.timesteps, n_envs=variant.n_envs, train_seconds=round(train_seconds, 1),
-        id_return=in_distribution.mean_return,
+        id_return=in_distribution.mean_return, machine=machine_description(),
         id_score=normalised_score(in_distribution.mean_return, reference_of(variant.demos)), ood=record,
         **ood_measures(record),
     )  # fmt: skip
@@ -226,16 +229,19 @@ def report(results_dir: Path, names: Sequence[str], command: str) -> str:
     :param command: the command line to quote
     """
     columns = ("id_score", "reached_reachable", "final_reward", "progress", "circling")
+    ceiling = ood_measures(true_reward_record(N_OOD_STARTS, Path(results_dir).parent))
     header = [
         "| variant | what changes | seeds | in-distribution score | OOD: within 2 m, reachable starts | OOD: mean final "
         "reward | OOD: mean progress | OOD: ends circling |",
         "|---|---|---|---|---|---|---|---|",
     ]
     rows: Dict[bool, List[str]] = {True: [], False: []}
+    every_run: List[Dict[str, Any]] = []
     for name in names:
         runs = [json.loads(p.read_text()) for p in sorted(Path(results_dir).glob(f"{name}_seed*.json"))]
         if not runs:
             continue
+        every_run += runs
         cells = [format_ci(*mean_ci([run[column] for run in runs])) for column in columns]
         variant = VARIANTS[name]
         rows[variant.counts].append(f"| `{name}` | {variant.question} | {len(runs)} | " + " | ".join(cells) + " |")
@@ -254,11 +260,15 @@ def report(results_dir: Path, names: Sequence[str], command: str) -> str:
         "",
         *header,
         *rows[True],
+        f"| {TRUE_REWARD_LABEL} | no learning: the untrained planner's costs are the true reward's | – | – | "
+        + " | ".join(f"{ceiling[column]:.2f}" for column in columns[1:]) + " |",
+        "",
+        TRUE_REWARD_NOTE,
     ]
     if rows[False]:
         lines += ["", "Not trained as the paper trains (reported apart; these never count for the OOD target):", "",
                   *header, *rows[False]]  # fmt: skip
-    lines += ["", f"Command: `{command}` on {machine_description()}."]
+    lines += ["", f"Command: `{command}` on {machines_of(every_run)}."]
     return "\n".join(lines)
 
 

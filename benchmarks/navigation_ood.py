@@ -6,8 +6,9 @@ Each trained model (``--runs-dir/seed<N>/model.zip``) drives ``--n-starts`` dete
 starts uniform in the 40 x 40 m box centred at the origin with uniform heading (the grid runner's OOD test,
 :func:`benchmarks.runner.ood_episodes`: the same starts as every algorithm of the grid), and as many from the training
 start region. Reports the runner's measures (:func:`benchmarks.runner.ood_measures`: within 2 m of the goal among the
-starts any policy can reach, mean final reward, progress, circling), writes the ``navigation_ood`` section of
-BENCHMARKS.md and a figure of the OOD paths and final positions.
+starts any policy can reach, mean final reward, progress, circling), beside the ceiling of the same planner on the
+true reward (:func:`benchmarks.runner.true_reward_record`), writes the ``navigation_ood`` section of BENCHMARKS.md and
+a figure of the OOD paths and final positions.
 
 Usage::
 
@@ -24,7 +25,19 @@ import numpy as np
 import torch as th
 
 from benchmarks.report import machine_description, write_section
-from benchmarks.runner import GOAL, GOAL_RADIUS, MAX_TRAVEL, format_ci, mean_ci, ood_episodes, ood_measures, ood_record
+from benchmarks.runner import (
+    GOAL,
+    GOAL_RADIUS,
+    MAX_TRAVEL,
+    TRUE_REWARD_LABEL,
+    TRUE_REWARD_NOTE,
+    format_ci,
+    mean_ci,
+    ood_episodes,
+    ood_measures,
+    ood_record,
+    true_reward_record,
+)
 from sb3_mpail import MPAIL
 from sb3_mpail.envs.navigation import OOD_HALF_WIDTH
 from sb3_mpail.evaluation import evaluate_episodes
@@ -105,6 +118,7 @@ def main() -> None:
         at_home = evaluate_episodes(model, ENV_ID, args.n_starts, ID_SEED + seed)
         in_distribution.append(float(np.mean([info["distance_to_goal"] < GOAL_RADIUS for info in at_home.final_infos])))
         print(f"seed {seed}: {measures[-1]}, in distribution {in_distribution[-1]:.3f}", flush=True)
+    ceiling = ood_measures(true_reward_record(args.n_starts))
     wall_seconds = time.perf_counter() - started
     figure = plot_ood(first_paths, final_positions, first_reached, args.seeds, FIGURES / "navigation_ood.png")
 
@@ -125,7 +139,7 @@ def main() -> None:
         f"start within 1 m of the origin heading towards the goal), and {args.n_starts} from the training start "
         f"region. Success: the episode ends within {GOAL_RADIUS:g} m of the goal (10, 10); reachable starts: within "
         f"{MAX_TRAVEL + GOAL_RADIUS:g} m of it (no policy arrives from farther in 100 steps at the 3 m/s top speed). "
-        "Means ± 95% CI (Student's t) over the models.",
+        f"Means ± 95% CI (Student's t) over the models. {TRUE_REWARD_NOTE}",
         "",
         "| start region | within 2 m, reachable starts | within 2 m, all starts | mean final reward | mean progress "
         "| ends circling |",
@@ -134,6 +148,9 @@ def main() -> None:
                                    for k in ("reached_reachable", "reached", "final_reward", "progress", "circling"))
         + " |",
         f"| training starts | – | {summary(in_distribution)} | – | – | – |",
+        f"| OOD box, {TRUE_REWARD_LABEL} | "
+        + " | ".join(f"{ceiling[k]:.2f}" for k in ("reached_reachable", "reached", "final_reward", "progress", "circling"))
+        + " |",
         "",
         "Per model (OOD box): "
         + "; ".join(f"seed {seed}: {m['reached_reachable']:.3f} of reachable starts, final reward {m['final_reward']:.2f}"

@@ -2,6 +2,7 @@
 
 import platform
 from pathlib import Path
+from typing import Any, Iterable, Mapping
 
 import torch as th
 
@@ -20,6 +21,16 @@ def machine_description() -> str:
         pass
     gpu = f", GPU {th.cuda.get_device_name()}" if th.cuda.is_available() else ""
     return f"{cpu}, {th.get_num_threads()} torch threads{gpu}; torch {th.__version__}, Python {platform.python_version()}"
+
+
+def machines_of(runs: Iterable[Mapping[str, Any]]) -> str:
+    """
+    The machines a table's stored runs were measured on (each run's ``machine``, :func:`machine_description` when it
+    ran), for the report's machine line: the machine writing the report may be another.
+
+    :param runs: stored results
+    """
+    return "; ".join(sorted({run.get("machine", "machine not recorded") for run in runs}))
 
 
 def write_section(name: str, markdown: str, path: Path = BENCHMARKS_FILE) -> None:

@@ -33,12 +33,13 @@ import numpy as np
 import torch as th
 
 from benchmarks.baselines import ALGO_LABELS, ALGOS, ENV_NAMES, env_id_of, env_name_of, load_config, train_baseline
-from benchmarks.report import BENCHMARKS_FILE, machine_description, write_section
+from benchmarks.report import BENCHMARKS_FILE, machine_description, machines_of, write_section
 from benchmarks.scenarios import RESULTS as SCENARIO_RESULTS
 from benchmarks.scenarios import SCENARIOS, lap_figures
 from sb3_mpail.demos import list_shipped_demos, shipped_demo_info, shipped_demos
 from sb3_mpail.envs.navigation import DT, MAX_SPEED, REWARD_OFFSET
 from sb3_mpail.evaluation import Episodes, evaluate_episodes, normalised_score
+from sb3_mpail.train_navigation import make_model
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 FIGURES_DIR = Path(__file__).resolve().parent / "figures"
@@ -54,6 +55,14 @@ CIRCLING_YAW_RATE = 2.0
 #: the farthest a car drives in a 100-step episode at its 3 m/s top speed (metres)
 MAX_TRAVEL = MAX_SPEED * DT * 100
 NAVIGATION = "sb3_mpail/Navigation-v0"
+#: the true-reward planner's terminal value per metre to the goal: ten steps' worth, the planner's horizon
+TRUE_VALUE_SLOPE = 10.0
+TRUE_REWARD_LABEL = "the same planner on the true reward (the ceiling)"
+TRUE_REWARD_NOTE = (
+    "The ceiling: the main command's planner, untrained, planning on the true reward (step cost = the next state's "
+    f"distance to the goal, terminal value = -{TRUE_VALUE_SLOPE:g} x its distance) instead of a learned cost and "
+    "value, from the same starts (one deterministic run)."
+)
 LAP = "sb3_mpail/NavigationLap-v0"
 #: the lap's figures, in the order of its curve points after the env-step count
 LAP_FIGURES = ("cte_mean", "cte_max", "speed")
@@ -189,7 +198,7 @@ def train_job(job: Dict[str, Any], options: Dict[str, Any]) -> Dict[Path, Dict[s
     for name, path in paths.items():
         result: Dict[str, Any] = dict(
             env_id=env_id, algo=name, n_demos=n_demos, seed=seed, n_timesteps=budget, curve=curves[name],
-            train_seconds=round(seconds, 1), shared_run=list(algos), hyperparams=hyperparams,
+            train_seconds=round(seconds, 1), shared_run=list(algos), hyperparams=hyperparams, machine=machine_description(),
         )  # fmt: skip
         if env_id == LAP:
             result["lap"] = dict(zip(LAP_FIGURES, curves[name][-1][1:]))
@@ -407,6 +416,38 @@ def ood_record(episodes: Episodes) -> Dict[str, Any]:
     return dict(record, reached=measures["reached"], mean_final_reward=measures["final_reward"])
 
 
+class GoalDistance(th.nn.Module):
+    """The navigation reward as a step cost: the next position's distance to the goal (minus the reward, plus a constant)."""
+
+    def forward(self, states: th.Tensor, next_states: th.Tensor) -> th.Tensor:
+        return th.linalg.vector_norm(next_states[..., :2] - next_states.new_tensor(GOAL), dim=-1)
+
+
+class GoalValue(th.nn.Module):
+    """A terminal value for the true reward: ``-TRUE_VALUE_SLOPE`` times the distance to the goal."""
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        return -TRUE_VALUE_SLOPE * th.linalg.vector_norm(states[..., :2] - states.new_tensor(GOAL), dim=-1)
+
+
+def true_reward_record(n_episodes: int, results_dir: Path = RESULTS_DIR) -> Dict[str, Any]:
+    """
+    The ceiling of every navigation OOD table: the main command's planner (its ``policy_kwargs``, untrained) planning
+    on the true reward (:class:`GoalDistance` step costs, :class:`GoalValue` terminal value) instead of a learned one,
+    on the same :func:`ood_episodes` starts. Kept in ``<results-dir>/navigation_true_reward/<n>starts.json`` (computed
+    on the first call).
+
+    :param n_episodes: OOD episodes, as many as the table's runs drove
+    :param results_dir: where the record is kept
+    """
+    path = Path(results_dir) / "navigation_true_reward" / f"{n_episodes}starts.json"
+    if not path.exists():
+        planner = make_model(n_envs=1, policy_kwargs=dict(step_cost=GoalDistance(), terminal_value=GoalValue()))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(ood_record(ood_episodes(planner, n_episodes))))
+    return json.loads(path.read_text())
+
+
 def ood_measures(record: Dict[str, Any]) -> Dict[str, float]:
     """
     One run's OOD figures: the fraction of episodes ending within :data:`GOAL_RADIUS` of the goal (all, and among the
@@ -429,13 +470,16 @@ def ood_measures(record: Dict[str, Any]) -> Dict[str, float]:
     return measures
 
 
-def ood_table(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int) -> str:
+def ood_table(
+    results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int, ceiling: Optional[Dict[str, Any]] = None
+) -> str:
     """
     The navigation OOD table: per algorithm, :func:`ood_measures`' means over seeds with their 95% CIs.
 
     :param results: :func:`load_results`
     :param algos: rows
     :param n_demos: demo count
+    :param ceiling: :func:`true_reward_record` on the same starts, the last row
     """
     columns = ("reached_reachable", "reached", "final_reward", "progress")
     lines = [
@@ -453,6 +497,9 @@ def ood_table(results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int)
         measures = [ood_measures(run["ood"]) for run in runs]
         cells = [format_ci(*mean_ci([m[c] for m in measures])) if all(c in m for m in measures) else "–" for c in columns]
         lines.append(f"| {ALGO_LABELS[algo]} | {len(runs)} | " + " | ".join(cells) + " |")
+    if ceiling is not None:
+        measures = ood_measures(ceiling)
+        lines.append(f"| {TRUE_REWARD_LABEL} | – | " + " | ".join(f"{measures[c]:.2f}" for c in columns) + " |")
     return "\n".join(lines)
 
 
@@ -705,11 +752,12 @@ def write_report(
                 lines.append(f"MPAIL vs GAIL, {n_demos} demos, env steps to 0.9: MPAIL {steps_summary(mpail)}, "
                              f"GAIL {steps_summary(gail)}.")  # fmt: skip
         lines += [""] + [f"![{env_id}](benchmarks/figures/{figure.name})" for figure in figures if figure is not None]
-        lines += ["", f"Command: `{command}` on {machine_description()}."]
+        lines += ["", f"Command: `{command}` on {machines_of(results)}."]
         write_section(f"baselines-{name}", "\n".join(lines), report_file)
         if env_id == NAVIGATION and any("ood" in r for r in results):
             n_ood = 4 if 4 in grid_demos else grid_demos[0]
             gaussian = expert_pose_gaussian(demo_set, n_ood)
+            n_ood_starts = max(len(r["ood"]["final_rewards"]) for r in results if "ood" in r)
             figure = plot_ood(results, grid_algos, n_ood, figures_dir / f"baselines_{name}_ood.png", gaussian)
             ood = [
                 "## Navigation out of distribution" + ("" if demo_set == "navigation" else f", demos {demo_set}_<n>")
@@ -722,9 +770,10 @@ def write_report(
                 f"{MAX_TRAVEL + GOAL_RADIUS:g} m of it (farther, no policy arrives in 100 steps at the 3 m/s top speed); "
                 "final reward = sqrt(200) - final distance; progress = (start distance - final distance) / start "
                 "distance. Means ± 95% CI (Student's t) over seeds. OOD energy: the log-density of the start pose "
-                "(x, y, cos yaw, sin yaw) under a Gaussian fitted to the expert's poses (the paper's appendix).",
+                "(x, y, cos yaw, sin yaw) under a Gaussian fitted to the expert's poses (the paper's appendix). "
+                f"{TRUE_REWARD_NOTE}",
                 "",
-                ood_table(results, grid_algos, n_ood),
+                ood_table(results, grid_algos, n_ood, true_reward_record(n_ood_starts, results_dir)),
                 "",
             ]
             if figure is not None:
@@ -769,7 +818,7 @@ def lap_report(
         "",
         lap_table(results, algos, demos, n_seeds, scenario_mpail),
         "",
-        f"Command: `{command}` on {machine_description()}.",
+        f"Command: `{command}` on {machines_of(results)}.",
     ])  # fmt: skip
 
 

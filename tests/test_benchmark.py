@@ -7,7 +7,7 @@ import pytest
 from test_baselines import tiny_configs
 
 from benchmarks import runner
-from benchmarks.runner import main, make_jobs, mean_ci, steps_summary
+from benchmarks.runner import TRUE_REWARD_LABEL, main, make_jobs, mean_ci, ood_measures, steps_summary
 from sb3_mpail.demos import shipped_demo_info
 from sb3_mpail.evaluation import normalised_score
 
@@ -34,15 +34,20 @@ def test_runner_writes_results_and_report(tmp_path):
                  "--figures-dir", str(tmp_path / "figures"), "--eval-episodes", "2", "--ood-episodes", "3"]  # fmt: skip
     main(arguments)
     written = sorted(path.relative_to(results).as_posix() for path in results.rglob("*.json"))
-    assert written == [
-        f"{env}/{algo}_4demos_seed0.json" for env in ("navigation", "pendulum") for algo in ("bc", "gail", "irl_mpc")
-    ]
+    assert written == sorted(
+        [f"{env}/{algo}_4demos_seed0.json" for env in ("navigation", "pendulum") for algo in ("bc", "gail", "irl_mpc")]
+        + ["navigation_true_reward/3starts.json"]
+    )
     gail = json.loads((results / "navigation" / "gail_4demos_seed0.json").read_text())
     assert gail["shared_run"] == ["gail", "irl_mpc"] and gail["curve"][-1][0] == 64
     assert len(gail["ood"]["final_positions"]) == 3 and 0 <= gail["ood"]["reached"] <= 1
     text = report.read_text()
     assert "<!-- baselines-pendulum:start -->" in text and "<!-- baselines-navigation-ood:start -->" in text
     assert "| BC (uses expert actions) | 4 | 1/1 |" in text
+    # the OOD table's last row: the untrained planner on the true reward, from the same 3 starts
+    ceiling = json.loads((results / "navigation_true_reward" / "3starts.json").read_text())
+    assert len(ceiling["final_positions"]) == 3
+    assert f"| {TRUE_REWARD_LABEL} | – | {ood_measures(ceiling)['reached_reachable']:.2f} |" in text
     assert (tmp_path / "figures" / "baselines_navigation_ood.png").exists()
 
 
@@ -153,3 +158,16 @@ def test_ood_measures_count_only_reachable_starts_and_progress_relative_to_the_s
     assert measures["progress"] == pytest.approx(np.mean([9 / 10, 10 / 20, 39 / 40]))
     assert measures["final_reward"] == pytest.approx(offset - 4.0)
     assert measures["circling"] == pytest.approx(1 / 3)
+
+
+def test_an_ablation_report_names_the_machine_its_runs_ran_on(tmp_path):
+    from benchmarks import locomotion_ablations
+
+    grid = tmp_path / "Hopper-v4_100steps"
+    grid.mkdir()
+    for seed, machine in enumerate(["machine A", "machine B"]):
+        run = dict(env_id="Hopper-v4", variant="defaults", seed=seed, timesteps=100, n_eval_episodes=2, command="c",
+                   train_seconds=1.0, score=0.1, speed_ratio=0.2, length=30.0, machine=machine, **{"return": 5.0})  # fmt: skip
+        (grid / f"defaults_seed{seed}.json").write_text(json.dumps(run))
+    text = locomotion_ablations.report(tmp_path)
+    assert "2 evaluation episodes per run, on machine A; machine B." in text
