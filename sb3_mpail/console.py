@@ -1,8 +1,19 @@
 """
-Console scripts of ``[project.scripts]`` for the commands whose ``main`` returns what it made (results a caller
-may read): each drops it, since a console script exits with what its function returns. ``sb3-mpail-zoo`` is
-``sb3_mpail.zoo.main`` itself.
+The command lines' shared parts: their help formatter, and the console scripts of ``[project.scripts]`` for the
+commands whose ``main`` returns what it made (results a caller may read): each drops it, since a console script exits
+with what its function returns. ``sb3-mpail-zoo`` is ``sb3_mpail.zoo.main`` itself.
 """
+
+import argparse
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """argparse's ``(default: ...)`` after each help text, except where the text says its own default or there is none."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        if action.default is None or action.default is False or "default" in (action.help or ""):
+            return action.help
+        return super()._get_help_string(action)
 
 
 def train_navigation() -> None:

@@ -22,6 +22,7 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.env_util import make_vec_env
 
+from sb3_mpail.console import HelpFormatter
 from sb3_mpail.mppi.planner import rollout
 
 #: planar extent of the navigation figures: the 40 x 40 m box of the out-of-distribution starts, with a margin
@@ -401,28 +402,31 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog="python -m sb3_mpail.inspect",
         description="Draw a saved MPAIL model's learned step cost, value, decisions and sampled roll-outs over a plane.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     parser.add_argument("model", help="a saved MPAIL model (.zip)")
     parser.add_argument("--out", default=None, help="the PNG to write (default: beside the model, <name>_inspect.png)")
     parser.add_argument("--env-id", default="sb3_mpail/Navigation-v0", help="env of the planned episodes ('' for none)")
     parser.add_argument("--start-region", default="ood", help="the navigation env's start_region for the episodes")
-    parser.add_argument("--episodes", type=int, default=4)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--x-index", type=int, default=NAVIGATION_AXES.x_index)
-    parser.add_argument("--y-index", type=int, default=NAVIGATION_AXES.y_index)
-    parser.add_argument("--heading-index", type=int, default=NAVIGATION_AXES.heading_index, help="-1: none")
-    parser.add_argument("--speed-index", type=int, default=NAVIGATION_AXES.speed_index, help="-1: none")
+    parser.add_argument("--episodes", type=int, default=4, help="planned episodes drawn with their roll-outs")
+    parser.add_argument("--seed", type=int, default=0, help="reset seed of the first episode")
+    parser.add_argument("--x-index", type=int, default=NAVIGATION_AXES.x_index, help="state dimension of the plane's x")
+    parser.add_argument("--y-index", type=int, default=NAVIGATION_AXES.y_index, help="state dimension of the plane's y")
+    parser.add_argument("--heading-index", type=int, default=NAVIGATION_AXES.heading_index,
+                        help="state dimension of the heading (-1: none)")  # fmt: skip
+    parser.add_argument("--speed-index", type=int, default=NAVIGATION_AXES.speed_index,
+                        help="state dimension of the forward speed (-1: none)")  # fmt: skip
     parser.add_argument("--heading", type=float, default=math.pi / 4, help="heading of the cost and value fields (rad)")
     parser.add_argument("--speed", type=float, default=3.0, help="forward speed of the cost fields' template")
-    parser.add_argument("--forward-action", type=float, nargs="+", default=[1.0, 0.0])
-    parser.add_argument("--reverse-action", type=float, nargs="+", default=[-1.0, 0.0])
-    parser.add_argument("--extent", type=float, nargs=4, default=list(NAVIGATION_EXTENT), metavar=("X0", "X1", "Y0", "Y1"))
-    parser.add_argument("--resolution", type=int, default=61)
-    parser.add_argument("--arrow-resolution", type=int, default=15)
+    parser.add_argument("--forward-action", type=float, nargs="+", default=[1.0, 0.0], help="the action of driving forward")
+    parser.add_argument("--reverse-action", type=float, nargs="+", default=[-1.0, 0.0], help="the action of reversing")
+    parser.add_argument("--extent", type=float, nargs=4, default=list(NAVIGATION_EXTENT), metavar=("X0", "X1", "Y0", "Y1"),
+                        help="the plane drawn (metres)")  # fmt: skip
+    parser.add_argument("--resolution", type=int, default=61, help="grid points per side of the cost and value fields")
+    parser.add_argument("--arrow-resolution", type=int, default=15, help="arrows per side of the decision field")
     parser.add_argument("--n-headings", type=int, default=4, help="decision-field headings, evenly spaced from 0")
     parser.add_argument("--goal", type=float, nargs=2, default=[10.0, 10.0], help="point to mark")
-    parser.add_argument("--demos", default=None, help="demos (.npz) to draw")
+    parser.add_argument("--demos", default=None, help="demos (.npz) to draw (default: none)")
     return parser.parse_args(argv)
 
 

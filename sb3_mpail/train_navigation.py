@@ -14,6 +14,7 @@ settings, wall-clock and, with ``--eval-freq``, the learning curve).
 """
 
 import argparse
+import inspect
 import json
 import sys
 import time
@@ -26,9 +27,11 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
+from sb3_mpail.console import HelpFormatter
 from sb3_mpail.demos import DemoSource, list_shipped_demos, load_demo_episodes, shipped_demo_info
 from sb3_mpail.evaluation import evaluate_episodes, normalised_score, reference_returns
 from sb3_mpail.mpail import MPAIL
+from sb3_mpail.policies import MPPIPolicy
 
 ENV_ID = "sb3_mpail/Navigation-v0"
 #: the shipped demo set trained on by default: 4 demos of an expert that circles on the goal, as the paper's does (1 and
@@ -215,6 +218,20 @@ def _has_progress_bar_dependencies() -> bool:
     return True
 
 
+def override_help(name: str, cpu: Dict[str, Any], paper: Dict[str, Any], constructor: Any) -> str:
+    """
+    What a setting is without its flag: the main command's CPU default and the paper's, each the constructor's own
+    default where the settings leave it.
+
+    :param name: the constructor argument
+    :param cpu: the CPU settings
+    :param paper: the paper's settings
+    :param constructor: ``MPPIPolicy`` or ``MPAIL``
+    """
+    own = inspect.signature(constructor.__init__).parameters[name].default
+    return f"default {cpu.get(name, own)}; paper {paper.get(name, own)}"
+
+
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     """
     The command line.
@@ -224,7 +241,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog="python -m sb3_mpail.train_navigation",
         description="Train MPAIL on sb3_mpail/Navigation-v0 from observation-only demos, evaluate, save and plot.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     parser.add_argument(
         "--demos", default=DEFAULT_DEMOS, help="observation-only demos: a shipped demo set's name or a demo file (.npz)"
@@ -235,11 +252,11 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--n-envs", type=int, default=None, help=f"parallel envs (default {DEFAULT_N_ENVS}; paper {PAPER_N_ENVS})"
     )
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="seed of the envs, networks and planner noise")
     parser.add_argument(
         "--device", choices=("cpu", "cuda", "auto"), default="cpu", help="cuda also switches to --paper-settings"
     )
-    parser.add_argument("--out-dir", default="runs/navigation")
+    parser.add_argument("--out-dir", default="runs/navigation", help="where the model, results.json and figure go")
     parser.add_argument(
         "--paper-settings",
         action="store_true",
@@ -248,15 +265,17 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     )
     planner = parser.add_argument_group("planner overrides (policy_kwargs)")
     for name, kind in POLICY_OPTIONS.items():
-        planner.add_argument("--" + name.replace("_", "-"), type=kind, default=None)
+        help = override_help(name, DEFAULT_POLICY_KWARGS, PAPER_POLICY_KWARGS, MPPIPolicy)
+        planner.add_argument("--" + name.replace("_", "-"), type=kind, default=None, help=help)
     algorithm = parser.add_argument_group("algorithm overrides (MPAIL constructor)")
     for name, kind in ALGORITHM_OPTIONS.items():
-        algorithm.add_argument("--" + name.replace("_", "-"), type=kind, default=None)
+        help = override_help(name, DEFAULT_ALGORITHM_KWARGS, PAPER_ALGORITHM_KWARGS, MPAIL)
+        algorithm.add_argument("--" + name.replace("_", "-"), type=kind, default=None, help=help)
     parser.add_argument("--n-eval-episodes", type=int, default=10, help="deterministic evaluation episodes")
     parser.add_argument("--n-plot-episodes", type=int, default=5, help="planner episodes drawn in the figure")
     parser.add_argument("--eval-freq", type=int, default=0, help="record a learning curve every this many env steps (0: off)")
     parser.add_argument("--no-plot", action="store_true", help="skip the figure (no matplotlib needed)")
-    parser.add_argument("--no-progress-bar", action="store_true")
+    parser.add_argument("--no-progress-bar", action="store_true", help="no progress bar while training")
     parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     return parser.parse_args(argv)
 

@@ -62,11 +62,22 @@ def with_default_hyperparams(argv: Sequence[str]) -> List[str]:
     return list(argv)
 
 
+#: the zoo's scripts this command runs: rl_zoo3's command line's, and its record_video
+SCRIPTS = ("train", "enjoy", "record_video", "plot_train", "plot_from_file", "all_plots")
+
+
 def main() -> None:
     """Runs rl_zoo3's command line (``sys.argv``) with MPAIL registered and its shipped hyperparameters as default."""
     rl_zoo3 = _import_rl_zoo3()
     register()
-    if sys.argv[1:2] == ["record_video"]:
+    script = sys.argv[1] if len(sys.argv) > 1 else None
+    if script not in SCRIPTS:
+        usage = f"usage: python -m sb3_mpail.zoo {{{','.join(SCRIPTS)}}} [the script's options; --help after it lists them]"
+        if script in ("-h", "--help"):
+            print(usage + "\n" + __doc__)
+            return
+        raise SystemExit(usage + ("\nno script given" if script is None else f"\nunknown script {script!r}"))
+    if script == "record_video":
         # rl_zoo3's record_video is a script (no function to call, and not in its cli): run it as one
         del sys.argv[1]
         runpy.run_module("rl_zoo3.record_video", run_name="__main__", alter_sys=True)

@@ -101,6 +101,16 @@ def test_paper_settings_and_overrides():
     assert default["policy_kwargs"]["n_samples"] < 512
 
 
+def test_help_says_what_each_setting_is_without_its_flag(capsys):
+    with pytest.raises(SystemExit):
+        parse_args(["--help"])
+    help_text = " ".join(capsys.readouterr().out.split())  # argparse wraps lines
+    cpu, paper = DEFAULT_POLICY_KWARGS["n_samples"], PAPER_POLICY_KWARGS["n_samples"]
+    assert f"--n-samples N_SAMPLES default {cpu}; paper {paper}" in help_text
+    assert "--seed SEED seed of the envs, networks and planner noise (default: 0)" in help_text
+    assert "(default: None)" not in help_text and "(default: False)" not in help_text
+
+
 def test_missing_matplotlib_is_reported_with_the_plot_extra(monkeypatch):
     import builtins
 

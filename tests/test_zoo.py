@@ -54,3 +54,10 @@ def test_train_reads_the_shipped_hyperparameters_unless_a_file_is_named():
     assert with_default_hyperparams(named) == named
     for other in (["train", "--algo", "ppo", "--env", "Pendulum-v1"], ["enjoy", "--algo", "mpail", "--env", "Pendulum-v1"]):
         assert with_default_hyperparams(other) == other
+
+
+def test_zoo_help_lists_its_scripts_and_an_unknown_script_is_named():
+    helped = zoo("--help")
+    assert helped.returncode == 0 and "{train,enjoy,record_video," in helped.stdout
+    wrong = zoo("trian", "--algo", "mpail")
+    assert wrong.returncode != 0 and "unknown script 'trian'" in wrong.stderr and "Traceback" not in wrong.stderr
