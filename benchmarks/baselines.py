@@ -16,10 +16,10 @@ built on the ``imitation`` library and Stable-Baselines3:
   (:func:`make_action_demos`; pendulum's and cartpole's recovered exactly from the demos by inverting the env's
   dynamics).
 * ``irl_mpc``: the GAIL-learned reward and critic deployed through MPAIL's MPPI planner with no further training:
-  the GAIL run of ``benchmarks/configs/gail.yml``, its discriminator as step cost ``log(1 - D(s, s'))`` (the negated GAIL
+  the GAIL run of ``zoo_configs/gail.yml``, its discriminator as step cost ``log(1 - D(s, s'))`` (the negated GAIL
   reward) and its PPO critic as terminal value. Its env steps are GAIL's.
 
-Hyperparameters come from ``benchmarks/configs/<algo>.yml`` and, for MPAIL, from the package's own
+Hyperparameters come from ``zoo_configs/<algo>.yml`` and, for MPAIL, from the package's own
 ``sb3_mpail/hyperparams/mpail.yml`` (rl_zoo3's layout, :func:`load_config`).
 
 Action-labelled demos for BC: ``python -m benchmarks.baselines make-action-demos --env navigation``.
@@ -57,10 +57,10 @@ from sb3_mpail.envs import cartpole
 from sb3_mpail.envs.locomotion import LOCOMOTION_TASKS
 from sb3_mpail.mppi.costs import FeatureSelection, make_transition_discriminator
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, PendulumDynamics
-from sb3_mpail.zoo import HYPERPARAMS
 
-#: the baselines' hyperparameter files; MPAIL's are the package's own (``sb3_mpail.zoo.HYPERPARAMS``)
-CONFIG_DIR = Path(__file__).resolve().parent / "configs"
+#: every algorithm's rl_zoo3-style hyperparameter file; MPAIL's is the package's own (``sb3_mpail.zoo.HYPERPARAMS``,
+#: linked there as ``mpail.yml``)
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "zoo_configs"
 #: the expert-action twins of the shipped demos, for BC only (experiment data, not shipped with the package)
 ACTION_DEMO_DIR = Path(__file__).resolve().parent / "action_demos"
 #: the scripts that made the shipped demos
@@ -123,15 +123,12 @@ def env_name_of(env_id: str) -> str:
 
 def config_path(algo: str, config_dir: Optional[Path] = None) -> Path:
     """
-    The hyperparameter file of ``algo``: ``<config_dir>/<algo>.yml``, by default :data:`CONFIG_DIR`'s, or the
-    package's own for MPAIL.
+    The hyperparameter file of ``algo``: ``<config_dir>/<algo>.yml``.
 
     :param algo: one of :data:`ALGOS`
-    :param config_dir: a folder holding every algorithm's file (``None``: the defaults)
+    :param config_dir: a folder holding every algorithm's file (``None``: :data:`CONFIG_DIR`)
     """
-    if config_dir is not None:
-        return Path(config_dir) / f"{algo}.yml"
-    return HYPERPARAMS if algo == "mpail" else CONFIG_DIR / f"{algo}.yml"
+    return Path(CONFIG_DIR if config_dir is None else config_dir) / f"{algo}.yml"
 
 
 def load_config(algo: str, env_id: str, config_dir: Optional[Path] = None) -> Dict[str, Any]:

@@ -1,6 +1,6 @@
 """
 The benchmark grid: MPAIL against GAIL, AIRL (obs-only), BC (uses expert actions) and IRL-MPC, on the same demos and
-env-step budget (``benchmarks/configs/<algo>.yml``, MPAIL's ``sb3_mpail/hyperparams/mpail.yml``), over envs x demo
+env-step budget (``zoo_configs/<algo>.yml``, MPAIL's ``sb3_mpail/hyperparams/mpail.yml``), over envs x demo
 counts x seeds.
 
     python -m benchmarks.runner --envs navigation pendulum --algos mpail gail airl bc irl_mpc --demos 1 4 16 --seeds 5
@@ -736,7 +736,7 @@ def write_report(
             f"{stats['expert_return_mean']:.1f} ({stats['expert_algo']}); final deterministic evaluation on "
             f"episodes from fixed seeds; mean ± 95% CI (Student's t) over seeds. Env-step budgets: "
             + ", ".join(f"{ALGO_LABELS[a]} {'/'.join(map(str, budgets[a])) or '-'}" for a in grid_algos)
-            + " (benchmarks/configs/<algo>.yml, MPAIL's sb3_mpail/hyperparams/mpail.yml, unless `--timesteps` overrides "
+            + " (zoo_configs/<algo>.yml, MPAIL's sb3_mpail/hyperparams/mpail.yml, unless `--timesteps` overrides "
             "them). BC uses the expert's actions and no env "
             "steps; IRL-MPC's env steps are its GAIL run's. Learning curves are evaluated once the env-step count passes "
             "each multiple of `--eval-every` (default a tenth of the budget), after whole rollouts or rounds, so env "

@@ -26,6 +26,7 @@ from benchmarks.baselines import (
 from sb3_mpail.demos import list_shipped_demos, shipped_demos
 from sb3_mpail.evaluation import evaluate_episodes
 from sb3_mpail.mppi.dynamics import PendulumDynamics
+from sb3_mpail.zoo import HYPERPARAMS
 
 ENVS = ("Pendulum-v1", "sb3_mpail/Navigation-v0")
 CARTPOLE, LAP = "sb3_mpail/ContinuousCartPole-v0", "sb3_mpail/NavigationLap-v0"
@@ -49,6 +50,11 @@ def tiny_configs(directory: Path) -> Path:
             entry.update(TINY[algo])
         (directory / f"{algo}.yml").write_text(yaml.safe_dump(entries))
     return directory
+
+
+def test_every_algorithm_s_config_is_in_zoo_configs_and_mpail_s_is_the_shipped_file_itself():
+    assert all(config_path(algo).is_file() for algo in ALGOS)
+    assert config_path("mpail").samefile(HYPERPARAMS)  # a link: no second copy to drift
 
 
 @pytest.mark.parametrize("algo", ALGOS)
