@@ -64,6 +64,11 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         question="the prior's actor and Q networks 128 x 128 instead of 256 x 256 (an update takes 0.6x the time)",
         changes=dict(policy_kwargs=dict(prior_kwargs=dict(net_arch=(128, 128)))),
     ),
+    "standardised-inputs": dict(
+        question="the discriminator's inputs standardised with the demos' statistics, scales floored at 0.01 only (as "
+        "MPAIL2 standardises its observations)",
+        changes=dict(policy_kwargs=dict(standardise_inputs=True, min_input_scale=0.01)),
+    ),
     "discriminator-replay": dict(
         question="the discriminator also sees the last 50,000 agent transitions",
         changes=dict(discriminator_replay_size=50_000),

@@ -29,7 +29,6 @@ from typing import Any, Callable, Dict, List, Sequence
 
 import numpy as np
 import torch as th
-from torch import nn
 
 from benchmarks.report import machine_description, machines_of, write_section
 from benchmarks.runner import (
@@ -48,6 +47,7 @@ from benchmarks.runner import (
 from sb3_mpail.demos import shipped_demos
 from sb3_mpail.evaluation import evaluate_episodes, normalised_score
 from sb3_mpail.mppi import AngleFeatures
+from sb3_mpail.mppi.costs import StandardisedFeatures
 from sb3_mpail.train_navigation import (
     DEFAULT_DEMOS,
     DEFAULT_N_ENVS,
@@ -94,30 +94,11 @@ class Variant:
     counts: bool = True
 
 
-class Standardise(nn.Module):
-    """
-    ``(x - mean) / scale`` per input, with the demos' statistics; the scale is floored at 1 so that inputs the demos
-    hold nearly constant (height, roll, pitch) are not blown up.
-
-    :param mean: the demos' mean input
-    :param scale: the demos' standard deviation
-    """
-
-    def __init__(self, mean: th.Tensor, scale: th.Tensor):
-        super().__init__()
-        self.register_buffer("mean", mean)
-        self.register_buffer("scale", scale.clamp(min=1.0))
-
-    def forward(self, inputs: th.Tensor) -> th.Tensor:
-        return (inputs - self.mean) / self.scale
-
-
 def standardised_headings() -> Dict[str, Any]:
     """Both networks on the heading as cosine and sine, standardised with the default demos' statistics."""
-    headings = AngleFeatures([5])
     family, n_demos = DEFAULT_DEMOS.rsplit("_", 1)
-    features = headings(th.as_tensor(np.concatenate([t.obs for t in shipped_demos(family, int(n_demos))])))
-    standardised = nn.Sequential(headings, Standardise(features.mean(0), features.std(0)))
+    standardised = StandardisedFeatures(AngleFeatures([5]), 13, min_scale=1.0)  # 12-D state, the heading as cos, sin
+    standardised.fit(th.as_tensor(np.concatenate([t.obs for t in shipped_demos(family, int(n_demos))])))
     return dict(discriminator_features=standardised, value_features=standardised)
 
 
@@ -138,6 +119,11 @@ VARIANTS: Dict[str, Variant] = {
     ),
     "standardised-inputs": Variant(
         "both networks' inputs standardised with the demos' statistics (scale floored at 1)", standardised_headings
+    ),
+    "standardised-inputs-option": Variant(
+        "the library's standardise_inputs: both networks' inputs (the value's on the heading as cosine and sine too) "
+        "standardised with the demos' statistics of s and s'",
+        lambda: dict(value_features=dict(angles=[5]), standardise_inputs=True),
     ),
     "discriminator-replay": Variant(
         "the discriminator also sees the last 10 rollouts (8000 agent transitions)",

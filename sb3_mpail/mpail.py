@@ -305,9 +305,15 @@ class MPAIL(BaseAlgorithm):
         the model.
         """
         if self.demos_are_features:
+            if self.policy_kwargs.get("standardise_inputs"):
+                raise ValueError(
+                    "standardise_inputs fits its statistics to demo observations, but demos_are_features=True gives "
+                    "features: pass observation demos, or standardise inside your discriminator_features map."
+                )
             self.expert = load_demos(demos, self.policy.feature_space, "the discriminator's feature space")
             return
         expert = load_demos(demos, self.observation_space)
+        self.policy.fit_input_statistics(self._tensor(np.concatenate([expert.observations, expert.next_observations])))
         with th.no_grad():
             self.expert = ExpertTransitions(
                 *(self.policy.features(self._tensor(array)).cpu().numpy() for array in expert)

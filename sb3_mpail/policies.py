@@ -14,6 +14,7 @@ from sb3_mpail.checks import (
     NON_NEGATIVE_INTEGER,
     NON_NEGATIVE_NUMBER,
     OPTIONAL_DICT,
+    POSITIVE_NUMBER,
     check_arguments,
     check_finite,
     per_action_dimension,
@@ -22,6 +23,7 @@ from sb3_mpail.mppi.costs import (
     FeatureMap,
     FeatureSpec,
     MappedNetwork,
+    StandardisedFeatures,
     TerminalValue,
     TransitionCost,
     make_transition_discriminator,
@@ -91,6 +93,12 @@ class MPPIPolicy(BasePolicy):
     :param prior_kwargs: keyword arguments of the :class:`~sb3_mpail.prior.PolicyPrior` (``net_arch``, ``n_critics``,
         ``learning_rate``, ``gamma``, ``tau``)
     :param n_proposals: sequences per env the prior adds to each iteration's ``n_samples``
+    :param standardise_inputs: the discriminator's and the value's inputs (after ``discriminator_features`` and
+        ``value_features``) standardised with the demos' statistics (:class:`~sb3_mpail.mppi.costs.StandardisedFeatures`,
+        fitted by :class:`~sb3_mpail.MPAIL` from the first demos it is given and saved with the model); the policy
+        prior's networks see the raw observations
+    :param min_input_scale: the floor of each standardised input's scale (``1``: inputs that vary less than one unit
+        in the demos are only centred)
     :raises ValueError: a setting is out of its range (each is named)
     """
 
@@ -120,6 +128,8 @@ class MPPIPolicy(BasePolicy):
         policy_prior: bool = False,
         prior_kwargs: Dict[str, Any] | None = None,
         n_proposals: int = 24,
+        standardise_inputs: bool = False,
+        min_input_scale: float = 1.0,
     ):
         super().__init__(observation_space, action_space)
         if not isinstance(observation_space, spaces.Box) or len(observation_space.shape) != 1:
@@ -144,6 +154,8 @@ class MPPIPolicy(BasePolicy):
             policy_prior=(policy_prior, BOOLEAN),
             prior_kwargs=(prior_kwargs, OPTIONAL_DICT),
             n_proposals=(n_proposals, NON_NEGATIVE_INTEGER),
+            standardise_inputs=(standardise_inputs, BOOLEAN),
+            min_input_scale=(min_input_scale, POSITIVE_NUMBER),
         )
         self._constructor_kwargs = dict(
             dynamics=dynamics,
@@ -168,20 +180,29 @@ class MPPIPolicy(BasePolicy):
             policy_prior=policy_prior,
             prior_kwargs=prior_kwargs,
             n_proposals=n_proposals,
+            standardise_inputs=standardise_inputs,
+            min_input_scale=min_input_scale,
         )
         self.discriminator_features: nn.Module | None = None
         self.feature_space = observation_space
         if discriminator_features is not None:
             self.discriminator_features = FeatureMap.wrap(discriminator_features, "discriminator_features")
             self.feature_space = FeatureMap.space(self.discriminator_features, observation_space, "discriminator_features")
+        if standardise_inputs:
+            n_features = self.feature_space.shape[0]
+            self.discriminator_features = StandardisedFeatures(self.discriminator_features, n_features, min_input_scale)
         self.discriminator = make_transition_discriminator(
             self.feature_space, action_space, discriminator_hidden_sizes, use_spectral_norm
         )
         self.value_net = make_value_network(observation_space.shape[0], value_hidden_sizes)
+        value_map, value_inputs = None, observation_space.shape[0]
         if value_features is not None:
-            mapped = FeatureMap.wrap(value_features, "value_features").requires_grad_(False)  # fixed: not optimised
-            value_inputs = FeatureMap.space(mapped, observation_space, "value_features").shape[0]
-            self.value_net = MappedNetwork(mapped, make_value_network(value_inputs, value_hidden_sizes))
+            value_map = FeatureMap.wrap(value_features, "value_features").requires_grad_(False)  # fixed: not optimised
+            value_inputs = FeatureMap.space(value_map, observation_space, "value_features").shape[0]
+        if standardise_inputs:
+            value_map = StandardisedFeatures(value_map, value_inputs, min_input_scale)
+        if value_map is not None:
+            self.value_net = MappedNetwork(value_map, make_value_network(value_inputs, value_hidden_sizes))
         self.dynamics = make_dynamics(dynamics, observation_space, action_space, dynamics_kwargs)
         self.prior = PolicyPrior(observation_space, action_space, **(prior_kwargs or {})) if policy_prior else None
         if terminal_value is None:
@@ -212,6 +233,15 @@ class MPPIPolicy(BasePolicy):
 
     def _get_constructor_parameters(self) -> Dict[str, Any]:
         return {**super()._get_constructor_parameters(), **self._constructor_kwargs}
+
+    def fit_input_statistics(self, states: th.Tensor) -> None:
+        """
+        Fits the standardised inputs (``standardise_inputs``) not fitted yet to ``(batch, state_dim)`` states, the
+        demos': once fitted (or loaded), a network's input scaling stays what it was trained with.
+        """
+        for module in self.modules():
+            if isinstance(module, StandardisedFeatures) and not module.fitted:
+                module.fit(states)
 
     def features(self, states: th.Tensor) -> th.Tensor:
         """What the discriminator sees of ``(batch, state_dim)`` states: ``discriminator_features`` or the states."""

@@ -218,6 +218,40 @@ class FeatureMap(nn.Module):
         return spaces.Box(-np.inf, np.inf, (probe.shape[1],), np.float32)
 
 
+class StandardisedFeatures(nn.Module):
+    """
+    A feature map's output standardised per feature, ``(features(x) - mean) / scale``, with statistics fitted once
+    (from the demos, :meth:`fit`) and saved with the model: the networks behind it then see inputs of comparable size
+    whatever the units of the state (metres beside m/s beside rad), which spectral norm's slope bound and the first
+    layer's initialisation assume. The scale is floored so that features the demos hold nearly constant are not blown
+    up far from them.
+
+    :param features: the map standardised (``None``: the states themselves)
+    :param n_features: its output size
+    :param min_scale: the floor of each feature's scale (its standard deviation in the demos)
+    """
+
+    def __init__(self, features: Optional[nn.Module], n_features: int, min_scale: float = 1.0):
+        super().__init__()
+        self.features = features
+        self.min_scale = float(min_scale)
+        self.register_buffer("mean", th.zeros(n_features))
+        self.register_buffer("scale", th.ones(n_features))
+        self.register_buffer("fitted", th.tensor(False))
+
+    def fit(self, states: th.Tensor) -> None:
+        """Sets the statistics from ``(batch, state_dim)`` states (the demos'), at least two of them."""
+        with th.no_grad():
+            mapped = states if self.features is None else self.features(states)
+            self.mean.copy_(mapped.mean(0))
+            self.scale.copy_(mapped.std(0).clamp(min=self.min_scale))
+            self.fitted.fill_(True)
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        mapped = states if self.features is None else self.features(states)
+        return (mapped - self.mean) / self.scale
+
+
 class MappedNetwork(nn.Module):
     """
     ``network(features(x))``: a network behind a fixed feature map (the value's ``value_features``), kept apart so the
