@@ -1,6 +1,6 @@
 """The MPPI "policy": no actor network, an online planner over a learned cost, value and a dynamics model."""
 
-from typing import Any, Dict, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, Sequence, Tuple, Union
 
 import numpy as np
 import torch as th
@@ -85,6 +85,10 @@ class MPPIPolicy(BasePolicy):
     :param sampler_kwargs: keyword arguments of a named sampler (e.g. ``max_delta`` of ``"delta"``)
     :param step_cost: replaces the discriminator cost in the planner: ``c(states, next_states)`` over any leading shape
     :param terminal_value: replaces the learned value in the planner: ``V(states)`` over any leading shape
+    :param constraint_cost: a known cost ``g(states)`` over any leading shape (one number per state), added to the
+        learned costs of every state a roll-out reaches: what a designer knows that the dynamics model does not, such
+        as walls and obstacles (e.g. :class:`~sb3_mpail.mppi.constraints.RectangleObstacles`); never learned, saved
+        with the model like ``step_cost``
     :param compile_planner: compile the planner's roll-out/cost/weight update with ``torch.compile``: ``False``
         (default), ``True`` or a ``torch.compile`` mode (``"reduce-overhead"`` uses CUDA graphs on a GPU); same plans
     :param policy_prior: learned-model MPAIL's policy prior (:class:`~sb3_mpail.prior.PolicyPrior`, trained off-policy
@@ -124,6 +128,7 @@ class MPPIPolicy(BasePolicy):
         sampler_kwargs: Dict[str, Any] | None = None,
         step_cost: nn.Module | None = None,
         terminal_value: nn.Module | None = None,
+        constraint_cost: Callable[[th.Tensor], th.Tensor] | None = None,
         compile_planner: Union[bool, str] = False,
         policy_prior: bool = False,
         prior_kwargs: Dict[str, Any] | None = None,
@@ -176,6 +181,7 @@ class MPPIPolicy(BasePolicy):
             sampler_kwargs=sampler_kwargs,
             step_cost=step_cost,
             terminal_value=terminal_value,
+            constraint_cost=constraint_cost,
             compile_planner=compile_planner,
             policy_prior=policy_prior,
             prior_kwargs=prior_kwargs,
@@ -224,6 +230,7 @@ class MPPIPolicy(BasePolicy):
             compile_planner=compile_planner,
             prior=self.prior,
             n_proposals=n_proposals,
+            constraint_cost=constraint_cost,
         )
         self.register_buffer("temperature", th.tensor(1.0))
         self.register_buffer("action_low", th.as_tensor(low))

@@ -9,7 +9,7 @@ the same units (``achieved_goal`` repeats the ego features and is dropped). Its 
 """
 
 import functools
-from typing import Any, Dict, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import gymnasium as gym
 import numpy as np
@@ -126,6 +126,16 @@ class FlatParkingEnv(gym.Env):
         high = np.tile(np.array([10.0, 10.0, 10.0, 10.0, 1.0, 1.0], dtype=dtype), 2)
         self.observation_space = spaces.Box(-high, high, dtype=dtype)
         self.action_space = self.parking.action_space
+
+    @property
+    def road(self) -> Any:
+        """The parking lot's highway-env road (its walls, goal and vehicles), e.g. for obstacle costs."""
+        return self.parking.road
+
+    @property
+    def controlled_vehicles(self) -> List[Any]:
+        """The ego vehicle, in highway-env's list."""
+        return self.parking.controlled_vehicles
 
     def _flatten(self, observation: Dict[str, np.ndarray]) -> np.ndarray:
         return np.concatenate((observation["observation"], observation["desired_goal"])).astype(self.dtype)

@@ -103,9 +103,9 @@ def weighted_mean(weights: th.Tensor, actions: th.Tensor) -> th.Tensor:
 
 class TrajectoryCost:
     """
-    ``C_k = sum_t eta^t c(s_t, s_{t+1}) - eta^H V(s_H)`` for one planning step. Step cost and value run through
-    their fused planning views (weights frozen, see :class:`~sb3_mpail.mppi.fused.ViewCache`) where they offer one, else
-    as plain calls.
+    ``C_k = sum_t eta^t c(s_t, s_{t+1}) - eta^H V(s_H) + sum_t g(s_{t+1})`` for one planning step. Step cost and value
+    run through their fused planning views (weights frozen, see :class:`~sb3_mpail.mppi.fused.ViewCache`) where they
+    offer one, else as plain calls.
 
     :param step_cost: ``c(s, s')`` over any leading shape, or ``None`` (value-only)
     :param terminal_value: ``V(s)`` over any leading shape, or ``None`` (cost-only)
@@ -116,6 +116,8 @@ class TrajectoryCost:
     :param fused: use the fused views where available
     :param held_dims: state dimensions the roll-outs keep at their values in ``states`` (the dynamics model's
         ``held_state_dims``), which the fused views then need not read
+    :param constraint_cost: a known cost ``g(s)`` of every state reached (obstacles, walls) over any leading shape,
+        added unmarked-up to the learned costs, or ``None``
     """
 
     def __init__(
@@ -128,8 +130,10 @@ class TrajectoryCost:
         workspace: Workspace,
         fused: bool = True,
         held_dims: Sequence[int] = (),
+        constraint_cost: Optional[Callable[[th.Tensor], th.Tensor]] = None,
     ):
         self.step_cost = step_cost
+        self.constraint_cost = constraint_cost
         self.terminal_value = terminal_value
         self.markups = markup ** th.arange(horizon, device=states.device, dtype=states.dtype)
         self.terminal_markup = markup**horizon
@@ -161,6 +165,9 @@ class TrajectoryCost:
                 values = _checked_output(self.terminal_value(final_states), final_states.shape[:-1], "terminal_value")
             costs = values * -self.terminal_markup if costs is None else costs.sub_(values, alpha=self.terminal_markup)
         assert costs is not None
+        if self.constraint_cost is not None:
+            penalties = _checked_output(self.constraint_cost(states[1:]), states.shape[:-1], "constraint_cost", 1)
+            costs.add_(penalties.sum(0))
         return costs
 
 
@@ -209,6 +216,8 @@ class MPPIPlanner(nn.Module):
     :param prior: a policy prior (:class:`~sb3_mpail.prior.PolicyPrior`) whose ``propose(dynamics, states, horizon,
         n_proposals, generator)`` adds ``n_proposals`` sequences to every iteration's samples, or ``None``
     :param n_proposals: ``K``, the prior's sequences per env, drawn once per planning step
+    :param constraint_cost: a known cost ``g(s)`` of every state reached (walls, obstacles: what the dynamics model
+        does not know), over any leading shape, added to the learned costs; ``None``: none
     """
 
     def __init__(
@@ -227,6 +236,7 @@ class MPPIPlanner(nn.Module):
         compile_planner: Union[bool, str] = False,
         prior: Optional[nn.Module] = None,
         n_proposals: int = 0,
+        constraint_cost: Optional[Callable[[th.Tensor], th.Tensor]] = None,
     ):
         super().__init__()
         check_arguments(
@@ -253,6 +263,7 @@ class MPPIPlanner(nn.Module):
         self.compile_planner = compile_planner
         self.prior = prior
         self.n_proposals = n_proposals if prior is not None else 0
+        self.constraint_cost = constraint_cost
         self._workspace = Workspace()
         self._compiled_update: Optional[Callable] = None
         # one planning step at a time: the scratch tensors and the fused views' held inputs are shared between calls
@@ -273,6 +284,7 @@ class MPPIPlanner(nn.Module):
             self._workspace,
             fused=not self.compile_planner,
             held_dims=getattr(self.dynamics, "held_state_dims", ()),
+            constraint_cost=self.constraint_cost,
         )
 
     def forward(
@@ -348,6 +360,7 @@ class MPPIPlanner(nn.Module):
             self.n_samples,
             self.n_iterations,
             self.markup,
+            self.constraint_cost,
         )
         return PlanResult(plan, action_std)
 

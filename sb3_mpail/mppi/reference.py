@@ -45,14 +45,16 @@ def trajectory_costs(
     step_cost: Optional[Callable[[th.Tensor, th.Tensor], th.Tensor]],
     terminal_value: Optional[Callable[[th.Tensor], th.Tensor]],
     markup: float,
+    constraint_cost: Optional[Callable[[th.Tensor], th.Tensor]] = None,
 ) -> th.Tensor:
     """
-    ``C_k = sum_t eta^t c(s_t, s_{t+1}) - eta^H V(s_H)``; either term may be switched off (``None``).
+    ``C_k = sum_t eta^t c(s_t, s_{t+1}) - eta^H V(s_H) + sum_t g(s_{t+1})``; any term may be switched off (``None``).
 
     :param states: rolled-out states, ``(horizon + 1, n_envs, n_samples, state_dim)``
     :param step_cost: ``c(s, s')`` over any leading shape, or ``None`` for the value-only planner
     :param terminal_value: ``V(s)`` over any leading shape, or ``None`` for the cost-only planner
     :param markup: ``eta``, the per-step factor on step costs (``1 / gamma`` in MPAIL)
+    :param constraint_cost: a known cost ``g(s)`` of every state reached (obstacles, walls), over any leading shape
     :return: total cost per sample, ``(n_envs, n_samples)``
     """
     horizon = states.shape[0] - 1
@@ -62,6 +64,8 @@ def trajectory_costs(
         costs = costs + th.einsum("t,ten->en", markups, step_cost(states[:-1], states[1:]))
     if terminal_value is not None:
         costs = costs - markup**horizon * terminal_value(states[-1])
+    if constraint_cost is not None:
+        costs = costs + constraint_cost(states[1:]).sum(0)
     return costs
 
 
@@ -94,6 +98,7 @@ def reference_plan(
     n_samples: int = 512,
     n_iterations: int = 5,
     markup: float = 1.01,
+    constraint_cost: Optional[Callable[[th.Tensor], th.Tensor]] = None,
 ) -> Tuple[th.Tensor, th.Tensor]:
     """
     One planning step for every env, exactly as the paper's Algorithm 2 reads.
@@ -110,13 +115,14 @@ def reference_plan(
     :param n_samples: ``N``
     :param n_iterations: ``J``
     :param markup: ``eta``
+    :param constraint_cost: a known cost ``g(s)`` of every state reached, or ``None``
     :return: the plan ``(n_envs, horizon, action_dim)`` and the first action's std ``(n_envs, action_dim)``
     """
     plan = shift_plan(previous_plan, neutral_action)
     for _ in range(n_iterations):
         actions = sampler(plan, n_samples, generator)
         states_visited = rollout(dynamics, states, actions)
-        costs = trajectory_costs(states_visited, step_cost, terminal_value, markup)
+        costs = trajectory_costs(states_visited, step_cost, terminal_value, markup, constraint_cost)
         weights = mppi_weights(costs, temperature)
         plan = weighted_plan(weights, actions)
     return plan, weighted_action_std(weights, actions, plan)

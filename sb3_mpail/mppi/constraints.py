@@ -1,0 +1,98 @@
+"""
+Known costs a designer adds to the learned ones (the policy's ``constraint_cost``): what the planning model does not
+know, such as walls and obstacles, scored on every state a roll-out reaches. The standard MPPI answer to constraints:
+a large cost on the states that violate them, so that the exponential weights drop the samples that do.
+"""
+
+from typing import Any
+
+import numpy as np
+import torch as th
+from torch import nn
+
+
+class RectangleObstacles(nn.Module):
+    """
+    ``weight * (1 + depth / margin)`` for every state whose position lies within ``margin`` of one of a set of rectangles
+    (walls, parked cars), ``depth`` how far inside the inflated rectangle it is; 0 elsewhere. The depth term ranks
+    samples that all collide by how deep they go. The position is read from two state dimensions, in the observation's
+    units.
+
+    :param centres: rectangle centres, ``(n, 2)``
+    :param half_sizes: half length (along the rectangle's heading) and half width, ``(n, 2)``
+    :param headings: each rectangle's heading (rad), ``(n,)``; ``None``: all 0 (axis-aligned)
+    :param margin: how far around each rectangle the cost reaches (e.g. the vehicle's half width), ``> 0``
+    :param weight: the cost of a state at the inflated rectangle's edge, ``> 0``
+    :param x_index: the state dimension of the position's x
+    :param y_index: the state dimension of the position's y
+    """
+
+    def __init__(
+        self,
+        centres: Any,
+        half_sizes: Any,
+        headings: Any = None,
+        margin: float = 1.0,
+        weight: float = 100.0,
+        x_index: int = 0,
+        y_index: int = 1,
+    ):
+        super().__init__()
+        centres = th.as_tensor(np.asarray(centres, dtype=np.float32)).reshape(-1, 2)
+        half_sizes = th.as_tensor(np.asarray(half_sizes, dtype=np.float32)).reshape(-1, 2)
+        headings = th.zeros(len(centres)) if headings is None else th.as_tensor(np.asarray(headings, np.float32)).reshape(-1)
+        if not (len(centres) == len(half_sizes) == len(headings)):
+            raise ValueError(
+                f"RectangleObstacles needs one centre, half size and heading per rectangle; got {len(centres)} centres, "
+                f"{len(half_sizes)} half sizes and {len(headings)} headings."
+            )
+        if not (margin > 0 and weight > 0) or bool((half_sizes < 0).any()):
+            raise ValueError(f"RectangleObstacles needs margin > 0, weight > 0 and half sizes >= 0; got margin={margin}, "
+                             f"weight={weight}, half sizes {half_sizes.tolist()}.")  # fmt: skip
+        self.register_buffer("centres", centres)
+        self.register_buffer("inflated_half_sizes", half_sizes + margin)
+        self.register_buffer("cos_sin", th.stack((th.cos(headings), th.sin(headings)), dim=1))
+        self.margin, self.weight, self.x_index, self.y_index = float(margin), float(weight), x_index, y_index
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        offsets = states[..., [self.x_index, self.y_index]].unsqueeze(-2) - self.centres  # (..., n, 2)
+        cos, sin = self.cos_sin[:, 0], self.cos_sin[:, 1]
+        along = offsets[..., 0] * cos + offsets[..., 1] * sin
+        across = offsets[..., 1] * cos - offsets[..., 0] * sin
+        # how far inside each inflated rectangle: positive inside, on both of its axes
+        depth = th.minimum(self.inflated_half_sizes[:, 0] - along.abs(), self.inflated_half_sizes[:, 1] - across.abs())
+        inside = depth > 0
+        costs = th.where(inside, self.weight * (1 + depth / self.margin), th.zeros_like(depth))
+        return costs.sum(-1)
+
+
+def highway_env_obstacles(env: Any, position_scale: float = 1.0, margin: float = 1.0, weight: float = 100.0,
+                          x_index: int = 0, y_index: int = 1) -> RectangleObstacles:  # fmt: skip
+    """
+    The solid objects of a highway-env env's road after its reset (e.g. ``parking-v0``'s walls) and its vehicles other
+    than the controlled ones (parked cars), as :class:`RectangleObstacles` in the observation's units. They stay where
+    they were at that reset: objects that move, or change between episodes, need a cost of their own.
+
+    :param env: a highway-env env, reset (wrappers are looked through)
+    :param position_scale: metres per observation unit of the position (``sb3_mpail/Parking-v0``: 100)
+    :param margin: how far around each object the cost reaches, in metres (the ego's half width: 1 m)
+    :param weight: the cost at the edge
+    :param x_index: the state dimension of the position's x
+    :param y_index: the state dimension of the position's y
+    """
+    road = getattr(env.unwrapped, "road", None)
+    if road is None:
+        raise ValueError(f"highway_env_obstacles needs a highway-env env that has been reset; {env} has no road.")
+    controlled = set(map(id, getattr(env.unwrapped, "controlled_vehicles", ())))
+    objects = [o for o in road.objects if getattr(o, "solid", True)]
+    objects += [v for v in road.vehicles if id(v) not in controlled]
+    scale = float(position_scale)
+    return RectangleObstacles(
+        centres=[np.asarray(o.position, np.float64) / scale for o in objects] or np.zeros((0, 2)),
+        half_sizes=[(o.LENGTH / 2 / scale, o.WIDTH / 2 / scale) for o in objects] or np.zeros((0, 2)),
+        headings=[o.heading for o in objects],
+        margin=margin / scale,
+        weight=weight,
+        x_index=x_index,
+        y_index=y_index,
+    )

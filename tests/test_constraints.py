@@ -1,0 +1,102 @@
+"""A known constraint cost (walls, obstacles) added to the learned costs: where it is paid and what the planner does."""
+
+import numpy as np
+import pytest
+import torch as th
+from test_planner_equivalence import NAVIGATION, assert_same_plans, make_policy, navigation_states, plan_both_ways
+
+from sb3_mpail.mppi.constraints import RectangleObstacles, highway_env_obstacles
+from sb3_mpail.mppi.planner import rollout
+
+#: a wall 2 m thick across the x axis at x = 5, from y = -10 to 10
+WALL = dict(centres=[[5.0, 0.0]], half_sizes=[[1.0, 10.0]], margin=0.5, weight=100.0)
+
+
+def positions(*points) -> th.Tensor:
+    states = th.zeros(len(points), 12)
+    states[:, :2] = th.tensor(points, dtype=th.float32)
+    return states
+
+
+def test_the_cost_is_paid_inside_the_inflated_rectangle_only_and_grows_with_depth():
+    wall = RectangleObstacles(**WALL)
+    costs = wall(positions((0.0, 0.0), (3.4, 0.0), (4.0, 0.0), (5.0, 0.0), (5.0, 10.4), (5.0, 10.6)))
+    assert costs[0] == 0 and costs[1] == 0 and costs[5] == 0  # beyond the 0.5 m margin
+    assert 100 < costs[2] < costs[3] and costs[4] > 100  # inside: at least the weight, more deeper in
+    assert costs[3] == pytest.approx(100 * (1 + 1.5 / 0.5))  # the centre is 1.5 m inside the inflated wall
+
+
+def test_a_rotated_rectangle_is_scored_along_its_own_axes():
+    diagonal = RectangleObstacles(centres=[[0.0, 0.0]], half_sizes=[[5.0, 0.5]], headings=[np.pi / 4], margin=0.1)
+    on_it, beside_it = diagonal(positions((3.0, 3.0), (3.0, -3.0)))
+    assert on_it > 0 and beside_it == 0
+
+
+def test_costs_keep_any_leading_shape():
+    wall = RectangleObstacles(**WALL)
+    states = navigation_states(6).float().reshape(2, 3, 12)
+    assert wall(states).shape == (2, 3)
+
+
+@pytest.mark.parametrize("settings", [dict(margin=0.0), dict(weight=-1.0), dict(half_sizes=[[1.0, -1.0]])])
+def test_bad_rectangles_are_refused_naming_the_setting(settings):
+    with pytest.raises(ValueError, match="RectangleObstacles"):
+        RectangleObstacles(**{**WALL, **settings})
+
+
+def test_the_planner_with_a_constraint_cost_matches_the_reference_and_avoids_the_wall():
+    # drive towards a goal behind the wall: the true reward as the step cost, so only the wall differs
+    class GoalDistance(th.nn.Module):
+        def forward(self, states, next_states):
+            return th.linalg.vector_norm(next_states[..., :2] - next_states.new_tensor([10.0, 0.0]), dim=-1)
+
+    wall = RectangleObstacles(**WALL).double()
+    free = make_policy(NAVIGATION, "bicycle", n_samples=256, horizon=10, step_cost=GoalDistance(), use_terminal_value=False)
+    walled = make_policy(NAVIGATION, "bicycle", n_samples=256, horizon=10, step_cost=GoalDistance(), use_terminal_value=False,
+                         constraint_cost=wall)  # fmt: skip
+    states = navigation_states(2) * 0
+    states[:, 0] = 2.0  # 2 m before the wall, heading at the goal
+    optimised, reference = plan_both_ways(walled, states)
+    assert_same_plans(optimised, reference)
+
+    def wall_cost_of(policy):
+        plan = plan_both_ways(policy, states, n_steps=3)[0][-1][0]
+        with th.no_grad():
+            visited = rollout(policy.planner.dynamics, states, plan.transpose(0, 1).unsqueeze(2))
+        return wall(visited).sum().item()
+
+    assert wall_cost_of(free) > 0  # straight at the goal goes through the wall
+    assert wall_cost_of(walled) == 0  # the walled planner's plan does not
+
+
+def test_parking_walls_are_read_from_highway_env():
+    pytest.importorskip("highway_env", reason="parking needs highway-env (the scenarios extra)")
+    import gymnasium as gym
+
+    env = gym.make("sb3_mpail/Parking-v0")
+    env.reset(seed=0)
+    walls = highway_env_obstacles(env, position_scale=100.0)
+    assert walls.centres.shape == (4, 2)  # parking-v0's four walls, no parked cars by default
+    inside, centre = th.zeros(2, 12), th.zeros(1, 12)
+    inside[:, :2] = th.tensor([[0.0, 0.21], [-0.35, 0.0]])  # on the top and left walls (observation units: m / 100)
+    assert (walls(inside) > 0).all() and walls(centre).item() == 0
+
+
+def test_a_constraint_cost_is_saved_with_the_model_and_one_of_the_wrong_shape_is_named(tmp_path):
+    from sb3_mpail import MPAIL
+    from sb3_mpail.train_navigation import make_model
+
+    model = make_model(n_envs=1, policy_kwargs=dict(n_samples=8, horizon=3, n_iterations=1,
+                                                    constraint_cost=RectangleObstacles(**WALL)))  # fmt: skip
+    model.save(tmp_path / "walled")
+    loaded = MPAIL.load(tmp_path / "walled")
+    th.testing.assert_close(loaded.policy.planner.constraint_cost.centres, th.tensor([[5.0, 0.0]]))
+    obs = np.zeros((1, 12), np.float32)
+    assert np.array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
+
+    def one_per_env(states):
+        return states[..., 0].sum(-1)  # summed over samples: the wrong shape
+
+    wrong = make_model(n_envs=1, policy_kwargs=dict(n_samples=8, horizon=3, n_iterations=1, constraint_cost=one_per_env))
+    with pytest.raises(ValueError, match="constraint_cost must return"):
+        wrong.predict(obs, deterministic=True)
