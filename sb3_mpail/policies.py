@@ -19,6 +19,7 @@ from sb3_mpail.checks import (
     check_finite,
     per_action_dimension,
 )
+from sb3_mpail.mppi.constraints import make_constraint_cost
 from sb3_mpail.mppi.costs import (
     FeatureMap,
     FeatureSpec,
@@ -87,8 +88,9 @@ class MPPIPolicy(BasePolicy):
     :param terminal_value: replaces the learned value in the planner: ``V(states)`` over any leading shape
     :param constraint_cost: a known cost ``g(states)`` over any leading shape (one number per state), added to the
         learned costs of every state a roll-out reaches: what a designer knows that the dynamics model does not, such
-        as walls and obstacles (e.g. :class:`~sb3_mpail.mppi.constraints.RectangleObstacles`); never learned, saved
-        with the model like ``step_cost``
+        as walls and obstacles (e.g. :class:`~sb3_mpail.mppi.constraints.RectangleObstacles`), or the name of a ready
+        one (``"parking_walls"``, :data:`~sb3_mpail.mppi.constraints.CONSTRAINT_COSTS`); never learned, saved with the
+        model like ``step_cost``
     :param compile_planner: compile the planner's roll-out/cost/weight update with ``torch.compile``: ``False``
         (default), ``True`` or a ``torch.compile`` mode (``"reduce-overhead"`` uses CUDA graphs on a GPU); same plans
     :param policy_prior: learned-model MPAIL's policy prior (:class:`~sb3_mpail.prior.PolicyPrior`, trained off-policy
@@ -128,7 +130,7 @@ class MPPIPolicy(BasePolicy):
         sampler_kwargs: Dict[str, Any] | None = None,
         step_cost: nn.Module | None = None,
         terminal_value: nn.Module | None = None,
-        constraint_cost: Callable[[th.Tensor], th.Tensor] | None = None,
+        constraint_cost: str | Callable[[th.Tensor], th.Tensor] | None = None,
         compile_planner: Union[bool, str] = False,
         policy_prior: bool = False,
         prior_kwargs: Dict[str, Any] | None = None,
@@ -230,7 +232,7 @@ class MPPIPolicy(BasePolicy):
             compile_planner=compile_planner,
             prior=self.prior,
             n_proposals=n_proposals,
-            constraint_cost=constraint_cost,
+            constraint_cost=make_constraint_cost(constraint_cost),
         )
         self.register_buffer("temperature", th.tensor(1.0))
         self.register_buffer("action_low", th.as_tensor(low))

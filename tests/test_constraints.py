@@ -100,3 +100,15 @@ def test_a_constraint_cost_is_saved_with_the_model_and_one_of_the_wrong_shape_is
     wrong = make_model(n_envs=1, policy_kwargs=dict(n_samples=8, horizon=3, n_iterations=1, constraint_cost=one_per_env))
     with pytest.raises(ValueError, match="constraint_cost must return"):
         wrong.predict(obs, deterministic=True)
+
+
+def test_parking_walls_are_named_for_a_yaml_file_and_an_unknown_name_is_refused():
+    pytest.importorskip("highway_env", reason="parking needs highway-env (the scenarios extra)")
+    from sb3_mpail.mppi.constraints import make_constraint_cost
+
+    walls = make_constraint_cost("parking_walls")
+    assert isinstance(walls, RectangleObstacles) and walls.centres.shape == (4, 2)
+    with pytest.raises(ValueError, match="Unknown constraint_cost 'walls'.*parking_walls"):
+        make_constraint_cost("walls")
+    with pytest.raises(ValueError, match="constraint_cost must be"):
+        make_constraint_cost(3.0)

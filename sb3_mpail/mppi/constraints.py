@@ -4,7 +4,7 @@ know, such as walls and obstacles, scored on every state a roll-out reaches. The
 a large cost on the states that violate them, so that the exponential weights drop the samples that do.
 """
 
-from typing import Any
+from typing import Any, Callable, Dict, Optional, Union
 
 import numpy as np
 import torch as th
@@ -96,3 +96,42 @@ def highway_env_obstacles(env: Any, position_scale: float = 1.0, margin: float =
         x_index=x_index,
         y_index=y_index,
     )
+
+
+def parking_walls(margin: float = 1.0, weight: float = 100.0) -> RectangleObstacles:
+    """
+    parking-v0's four walls (its default config, walls on) in ``sb3_mpail/Parking-v0``'s observation units, read from a
+    freshly reset env (needs the ``scenarios`` extra).
+
+    :param margin: how far around each wall the cost reaches, in metres (the ego's half width: 1 m)
+    :param weight: the cost at the edge
+    """
+    import gymnasium as gym
+
+    import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Parking-v0)
+
+    env = gym.make("sb3_mpail/Parking-v0")
+    env.reset(seed=0)
+    walls = highway_env_obstacles(env, position_scale=100.0, margin=margin, weight=weight)
+    env.close()
+    return walls
+
+
+#: constraint costs by the name a ``constraint_cost`` setting (a YAML file's, say) can give
+CONSTRAINT_COSTS: Dict[str, Callable[[], nn.Module]] = {"parking_walls": parking_walls}
+
+
+def make_constraint_cost(spec: Union[str, Callable[[th.Tensor], th.Tensor], None]) -> Optional[Callable]:
+    """
+    The ``constraint_cost`` a setting names: a name of :data:`CONSTRAINT_COSTS`, a callable ``g(states)`` or ``None``.
+
+    :param spec: the setting
+    """
+    if isinstance(spec, str):
+        if spec not in CONSTRAINT_COSTS:
+            raise ValueError(f"Unknown constraint_cost {spec!r}: a name of {sorted(CONSTRAINT_COSTS)}, a callable or None.")
+        return CONSTRAINT_COSTS[spec]()
+    if spec is not None and not callable(spec):
+        raise ValueError(f"constraint_cost must be a name of {sorted(CONSTRAINT_COSTS)}, a callable or None; got {spec!r}.")
+    return spec
+
