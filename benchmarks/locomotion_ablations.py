@@ -69,6 +69,11 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         "MPAIL2 standardises its observations)",
         changes=dict(policy_kwargs=dict(standardise_inputs=True, min_input_scale=0.01)),
     ),
+    "prior-128-standardised": dict(
+        question="both: the prior's networks 128 x 128 and the discriminator's inputs standardised (scales >= 0.01)",
+        changes=dict(policy_kwargs=dict(prior_kwargs=dict(net_arch=(128, 128)), standardise_inputs=True,
+                                        min_input_scale=0.01)),  # fmt: skip
+    ),
     "discriminator-replay": dict(
         question="the discriminator also sees the last 50,000 agent transitions",
         changes=dict(discriminator_replay_size=50_000),
