@@ -39,7 +39,7 @@ from benchmarks.scenarios import SCENARIOS, lap_figures
 from sb3_mpail.demos import list_shipped_demos, shipped_demo_info, shipped_demos
 from sb3_mpail.envs.navigation import DT, MAX_SPEED, REWARD_OFFSET
 from sb3_mpail.evaluation import Episodes, evaluate_episodes, normalised_score
-from sb3_mpail.train_navigation import make_model
+from sb3_mpail.train_navigation import DEFAULT_POLICY_KWARGS, make_model
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 FIGURES_DIR = Path(__file__).resolve().parent / "figures"
@@ -434,18 +434,21 @@ def true_reward_record(n_episodes: int, results_dir: Path = RESULTS_DIR) -> Dict
     """
     The ceiling of every navigation OOD table: the main command's planner (its ``policy_kwargs``, untrained) planning
     on the true reward (:class:`GoalDistance` step costs, :class:`GoalValue` terminal value) instead of a learned one,
-    on the same :func:`ood_episodes` starts. Kept in ``<results-dir>/navigation_true_reward/<n>starts.json`` (computed
-    on the first call).
+    on the same :func:`ood_episodes` starts. Kept in ``<results-dir>/navigation_true_reward/<n>starts.json``, computed
+    again when the main command's planner settings or the starts' seed have changed since.
 
     :param n_episodes: OOD episodes, as many as the table's runs drove
     :param results_dir: where the record is kept
     """
     path = Path(results_dir) / "navigation_true_reward" / f"{n_episodes}starts.json"
-    if not path.exists():
-        planner = make_model(n_envs=1, policy_kwargs=dict(step_cost=GoalDistance(), terminal_value=GoalValue()))
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(ood_record(ood_episodes(planner, n_episodes))))
-    return json.loads(path.read_text())
+    settings = dict(planner=repr(sorted(DEFAULT_POLICY_KWARGS.items())), ood_seed=OOD_SEED, value_slope=TRUE_VALUE_SLOPE)
+    if path.exists() and json.loads(path.read_text()).get("settings") == settings:
+        return json.loads(path.read_text())
+    planner = make_model(n_envs=1, policy_kwargs=dict(step_cost=GoalDistance(), terminal_value=GoalValue()))
+    record = dict(ood_record(ood_episodes(planner, n_episodes)), settings=settings)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(record))
+    return record
 
 
 def ood_measures(record: Dict[str, Any]) -> Dict[str, float]:
