@@ -65,7 +65,7 @@ def steps_to_reach(curve: List[Dict[str, float]], target: float = TARGET) -> int
     :param target: normalised score to reach
     """
     for point in curve:
-        if point["normalized_score"] >= target:
+        if point["normalised_score"] >= target:
             return int(point["steps"])
     return None
 
@@ -117,7 +117,7 @@ def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
     demos_name = Path(args.demos).name
     figure = FIGURES / f"navigation_learning_curves_{Path(args.demos).stem}.png"
     curves = [
-        (np.array([p["steps"] for p in r["learning_curve"]]), np.array([p["normalized_score"] for p in r["learning_curve"]]))
+        (np.array([p["steps"] for p in r["learning_curve"]]), np.array([p["normalised_score"] for p in r["learning_curve"]]))
         for r in results
     ]
     plot_learning_curves(
@@ -161,9 +161,9 @@ def report(args: argparse.Namespace, wall_seconds: float | None) -> str:
     ]
     for r, score in zip(results, scores):
         reach = steps_to_reach(r["learning_curve"])
-        best = max(r["learning_curve"], key=lambda point: point["normalized_score"])
+        best = max(r["learning_curve"], key=lambda point: point["normalised_score"])
         lines.append(
-            f"| {r['seed']} | {score:.3f} | {r['normalized_score']:.3f} | {best['normalized_score']:.3f} "
+            f"| {r['seed']} | {score:.3f} | {r['normalised_score']:.3f} | {best['normalised_score']:.3f} "
             f"({best['steps']} steps) | {reach if reach is not None else 'not reached'} | {r['train_seconds']:.0f} |"
         )
     if wall_seconds is not None:
@@ -209,7 +209,7 @@ def main() -> None:
                     if process.returncode != 0:
                         raise SystemExit(f"seed {seed} failed (exit {process.returncode}); see its train.log")
                     result = json.loads((Path(args.out_dir) / f"seed{seed}" / "results.json").read_text())
-                    print(f"seed {seed}: score {result['normalized_score']:.3f}, {result['train_seconds']:.0f} s", flush=True)
+                    print(f"seed {seed}: score {result['normalised_score']:.3f}, {result['train_seconds']:.0f} s", flush=True)
         wall_seconds = time.perf_counter() - started
     markdown = report(args, wall_seconds)
     write_section(args.section, markdown)

@@ -5,6 +5,8 @@ with what its function returns. ``sb3-mpail-zoo`` is ``sb3_mpail.zoo.main`` itse
 """
 
 import argparse
+import sys
+from pathlib import Path
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -28,3 +30,14 @@ def inspect() -> None:
     from sb3_mpail.inspect import main
 
     main()
+
+
+def program_name(module: str, script: str) -> str:
+    """
+    A command's name for its usage line: the console script's when it runs as one, else ``python -m <module>``.
+
+    :param module: the module run with ``python -m``
+    :param script: its console script in ``[project.scripts]``
+    """
+    return script if Path(sys.argv[0]).name == script else f"python -m {module}"
+

@@ -22,7 +22,7 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.env_util import make_vec_env
 
-from sb3_mpail.console import HelpFormatter
+from sb3_mpail.console import HelpFormatter, program_name
 from sb3_mpail.mppi.planner import rollout
 
 #: planar extent of the navigation figures: the 40 x 40 m box of the out-of-distribution starts, with a margin
@@ -400,7 +400,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     :param argv: arguments (``None``: ``sys.argv``)
     """
     parser = argparse.ArgumentParser(
-        prog="python -m sb3_mpail.inspect",
+        prog=program_name("sb3_mpail.inspect", "sb3-mpail-inspect"),
         description="Draw a saved MPAIL model's learned step cost, value, decisions and sampled roll-outs over a plane.",
         formatter_class=HelpFormatter,
     )

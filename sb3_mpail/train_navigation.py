@@ -27,7 +27,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
-from sb3_mpail.console import HelpFormatter
+from sb3_mpail.console import HelpFormatter, program_name
 from sb3_mpail.demos import DemoSource, list_shipped_demos, load_demo_episodes, shipped_demo_info
 from sb3_mpail.evaluation import evaluate_episodes, normalised_score, reference_returns
 from sb3_mpail.mpail import MPAIL
@@ -239,7 +239,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     :param argv: arguments (``None``: ``sys.argv``)
     """
     parser = argparse.ArgumentParser(
-        prog="python -m sb3_mpail.train_navigation",
+        prog=program_name("sb3_mpail.train_navigation", "sb3-mpail-train-navigation"),
         description="Train MPAIL on sb3_mpail/Navigation-v0 from observation-only demos, evaluate, save and plot.",
         formatter_class=HelpFormatter,
     )
@@ -370,12 +370,12 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
         train_seconds=round(train_seconds, 1),
         mean_return=mean_return,
         std_return=std_return,
-        normalized_score=score,
+        normalised_score=score,
         n_eval_episodes=args.n_eval_episodes,
         model=str(model_path),
     )
     if callback is not None:
-        results["learning_curve"] = [dict(steps=s, mean_return=r, normalized_score=n) for s, r, n in callback.curve]
+        results["learning_curve"] = [dict(steps=s, mean_return=r, normalised_score=n) for s, r, n in callback.curve]
     if not args.no_plot and args.n_plot_episodes > 0:
         from sb3_mpail.plotting import plot_navigation
 

@@ -44,10 +44,10 @@ def test_main_command_trains_evaluates_saves_and_plots(trained):
     assert written["algorithm_kwargs"]["n_steps"] == 50
     assert np.isfinite(written["mean_return"])
     assert written["demos"] == DEFAULT_DEMOS == "navigation_circling_4"  # the shipped demo set, by name
-    assert written["normalized_score"] == pytest.approx(normalised_score(written["mean_return"], reference_of(DEFAULT_DEMOS)))
+    assert written["normalised_score"] == pytest.approx(normalised_score(written["mean_return"], reference_of(DEFAULT_DEMOS)))
     # learning curve every 100 steps, ending with the final model's evaluation
     assert [point["steps"] for point in written["learning_curve"]] == [100, 200]
-    assert written["learning_curve"][-1]["normalized_score"] == written["normalized_score"]
+    assert written["learning_curve"][-1]["normalised_score"] == written["normalised_score"]
 
 
 def test_saved_model_loads_without_demos_or_env_and_plans_in_and_out_of_distribution(trained):
@@ -126,3 +126,16 @@ def test_missing_matplotlib_is_reported_with_the_plot_extra(monkeypatch):
     monkeypatch.setattr(builtins, "__import__", no_matplotlib)
     with pytest.raises(ImportError, match=r"sb3-mpail\[plot\]"):
         plotting.import_pyplot()
+
+
+def test_the_console_script_names_itself_in_its_usage_line(capsys):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(sys.executable).parent / "sb3-mpail-train-navigation"  # installed by pip install -e . or the wheel
+    helped = subprocess.run([str(script), "--help"], capture_output=True, text=True, timeout=120)
+    assert helped.returncode == 0 and helped.stdout.startswith("usage: sb3-mpail-train-navigation ")
+    with pytest.raises(SystemExit):  # from anything else (here pytest), the python -m command
+        parse_args(["--help"])
+    assert capsys.readouterr().out.startswith("usage: python -m sb3_mpail.train_navigation ")
