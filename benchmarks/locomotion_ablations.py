@@ -122,8 +122,9 @@ def run_variant(
         score=normalised_score(figures["return"], reference), speed_ratio=figures["forward_speed"] / reference[
             "expert_forward_speed"], **figures,
     )  # fmt: skip
+    result["settings"] = settings  # what the variant's name meant when it ran: the zoo entry may change later
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(result))
+    path.write_text(json.dumps(result, default=repr))
     return path
 
 
