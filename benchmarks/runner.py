@@ -442,8 +442,9 @@ def true_reward_record(n_episodes: int, results_dir: Path = RESULTS_DIR) -> Dict
     """
     path = Path(results_dir) / "navigation_true_reward" / f"{n_episodes}starts.json"
     settings = dict(planner=repr(sorted(DEFAULT_POLICY_KWARGS.items())), ood_seed=OOD_SEED, value_slope=TRUE_VALUE_SLOPE)
-    if path.exists() and json.loads(path.read_text()).get("settings") == settings:
-        return json.loads(path.read_text())
+    stored = json.loads(path.read_text()) if path.exists() else {}
+    if stored.get("settings") == settings:
+        return stored
     planner = make_model(n_envs=1, policy_kwargs=dict(step_cost=GoalDistance(), terminal_value=GoalValue()))
     record = dict(ood_record(ood_episodes(planner, n_episodes)), settings=settings)
     path.parent.mkdir(parents=True, exist_ok=True)

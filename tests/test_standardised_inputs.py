@@ -1,29 +1,15 @@
 """standardise_inputs: the discriminator and the value see their inputs standardised with the demos' statistics."""
 
-import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from imitation.data.types import Trajectory
 from stable_baselines3.common.env_util import make_vec_env
+from test_mpail import pendulum_trajectories
 
 from sb3_mpail import MPAIL
 from sb3_mpail.mppi.costs import StandardisedFeatures
 
 TINY_PLANNER = dict(n_samples=16, horizon=3, n_iterations=2)
-
-
-def pendulum_demos(seed: int, n_episodes: int = 2, length: int = 30):
-    env = gym.make("Pendulum-v1")
-    env.action_space.seed(seed)
-    demos = []
-    for index in range(n_episodes):
-        observations = [env.reset(seed=seed + index)[0]]
-        for _ in range(length):
-            observations.append(env.step(env.action_space.sample())[0])
-        obs = np.array(observations, np.float32)
-        demos.append(Trajectory(obs=obs, acts=np.zeros((length, 1), np.float32), infos=None, terminal=False))
-    return demos
 
 
 def make_model(demos, **policy_kwargs):
@@ -38,7 +24,7 @@ def demo_statistics(demos, min_scale: float):
 
 @pytest.mark.parametrize("min_scale", [1.0, 0.1])
 def test_both_networks_inputs_are_standardised_with_the_demos_statistics(min_scale):
-    demos = pendulum_demos(0)
+    demos = pendulum_trajectories()
     model = make_model(demos, min_input_scale=min_scale)
     mean, scale = demo_statistics(demos, min_scale)
     for standardiser in (model.policy.discriminator_features, model.policy.value_net.features):
@@ -51,7 +37,7 @@ def test_both_networks_inputs_are_standardised_with_the_demos_statistics(min_sca
 
 
 def test_planner_costs_score_the_standardised_transitions():
-    demos = pendulum_demos(0)
+    demos = pendulum_trajectories()
     model = make_model(demos)
     policy = model.policy
     policy.set_training_mode(False)  # spectral norm's power iteration would move between the two calls
@@ -65,11 +51,11 @@ def test_planner_costs_score_the_standardised_transitions():
 
 
 def test_the_statistics_are_saved_and_new_demos_do_not_refit_them(tmp_path):
-    model = make_model(pendulum_demos(0))
+    model = make_model(pendulum_trajectories())
     model.learn(32)
     model.save(tmp_path / "model")
     loaded = MPAIL.load(tmp_path / "model", env=make_vec_env("Pendulum-v1", n_envs=1, seed=0))
-    loaded.set_demos(pendulum_demos(100, n_episodes=3))
+    loaded.set_demos(pendulum_trajectories(n=3, seed=100))
     for name in ("mean", "scale"):
         for trained, reloaded in ((model.policy.discriminator_features, loaded.policy.discriminator_features),
                                   (model.policy.value_net.features, loaded.policy.value_net.features)):  # fmt: skip
@@ -79,7 +65,7 @@ def test_the_statistics_are_saved_and_new_demos_do_not_refit_them(tmp_path):
 
 
 def test_standardising_demos_that_are_features_already_is_refused_saying_why():
-    demos = pendulum_demos(0)
+    demos = pendulum_trajectories()
     with pytest.raises(ValueError, match="standardise_inputs .* demos_are_features"):
         MPAIL("MlpMPPI", make_vec_env("Pendulum-v1", n_envs=1, seed=0), demos, demos_are_features=True,
               policy_kwargs=dict(TINY_PLANNER, standardise_inputs=True))  # fmt: skip
@@ -88,4 +74,4 @@ def test_standardising_demos_that_are_features_already_is_refused_saying_why():
 @pytest.mark.parametrize("setting", [dict(standardise_inputs="yes"), dict(min_input_scale=0.0)])
 def test_a_bad_standardisation_setting_is_named(setting):
     with pytest.raises(ValueError, match=next(iter(setting))):
-        make_model(pendulum_demos(0), **setting)
+        make_model(pendulum_trajectories(), **setting)
