@@ -307,51 +307,63 @@ def inspect_model(
         episodes=episodes,
         description=dict(
             heading=None if axes.heading_index is None else float(template[axes.heading_index]),
-            speed=speed,
+            speed=None if axes.speed_index is None else speed,
             forward_action=list(map(float, forward_action)),
             reverse_action=list(map(float, reverse_action)),
             env_id=env_id,
             env_kwargs=env_kwargs or {},
+            every=every,
+            template=[float(value) for value in template],
         ),
     )
 
 
-def plot_inspection(
+def inspection_figure(
     inspection: Inspection,
-    path: Union[str, Path],
     demo_paths: Sequence[np.ndarray] = (),
     goal: Tuple[float, float] | None = None,
     title: str | None = None,
-) -> Path:
+    axis_labels: Tuple[str, str] = ("x", "y"),
+):
     """
-    Five panels: the forward and the reverse step cost, the value, the decision field (arrows, one colour per
-    heading) and the episodes' paths with their sampled roll-outs coloured by MPPI weight.
+    The figure of an inspection, to read without the docs: the forward and the reverse step cost, the value, the
+    decision field (arrows, one colour per heading), the episodes' paths with their sampled roll-outs coloured by MPPI
+    weight, and a panel that says how the fields were made (the template state) and how to read them.
 
     :param inspection: what :func:`inspect_model` returned
-    :param path: where to write the PNG
     :param demo_paths: planar demo paths ``(T + 1, 2)`` drawn in white (cost panels) or grey
     :param goal: a point to mark, e.g. the navigation goal
-    :param title: figure title
+    :param title: the figure's title (``None``: a generic one)
+    :param axis_labels: the names of the plane's two coordinates (with their units)
+    :return: a matplotlib figure
     """
-    from sb3_mpail.plotting import import_pyplot, save_figure
+    from sb3_mpail.plotting import import_pyplot
 
     plt = import_pyplot()
-    figure, panels = plt.subplots(2, 3, figsize=(19, 12), constrained_layout=True)
+    figure, panels = plt.subplots(2, 3, figsize=(19, 12.5), layout="constrained")
     panels = panels.ravel()
     described = inspection.description
-    heading = "" if described["heading"] is None else f" at heading {described['heading']:.2f} rad"
-    speed = described["speed"]
+    speed, heading = described["speed"], described["heading"]
+
+    def state_said(speed_value: float | None) -> str:
+        said = [] if speed_value is None else [f"speed {speed_value:g}"]
+        said += [] if heading is None else [f"heading {heading:.2f} rad"]
+        return f"\n(from {', '.join(said)})" if said else ""
+
     fields = [
-        (inspection.forward_cost, f"step cost of {described['forward_action']}{heading}, speed {speed:g}", "cost"),
-        (inspection.reverse_cost, f"step cost of {described['reverse_action']}{heading}, speed {-speed:g}", "cost"),
-        (inspection.value, f"value V(s){heading}, speed 0 template", "value"),
-    ]
+        (inspection.forward_cost, f"Step cost of the move {described['forward_action']}" + state_said(speed),
+         "step cost c(s, f(s, a)): low = expert-like"),
+        (inspection.reverse_cost, f"Step cost of the move {described['reverse_action']}" + state_said(speed and -speed),
+         "step cost c(s, f(s, a)): low = expert-like"),
+        (inspection.value, "Terminal value V(s)" + state_said(None if speed is None else 0.0),
+         "value V(s): high = the planner heads there"),
+    ]  # fmt: skip
     for panel, (values, name, label) in zip(panels, fields):
         image = panel.pcolormesh(inspection.xs, inspection.ys, values, cmap="viridis", shading="auto")
-        figure.colorbar(image, ax=panel, label=label)
+        figure.colorbar(image, ax=panel, label=label, shrink=0.85)
         panel.set_title(name)
-        for demo in demo_paths:
-            panel.plot(demo[:, 0], demo[:, 1], color="w", lw=1, alpha=0.8)
+        for index, demo in enumerate(demo_paths):
+            panel.plot(demo[:, 0], demo[:, 1], color="w", lw=1, alpha=0.8, label="demos" if index == 0 else None)
     arrows = panels[3]
     grid_x, grid_y = np.meshgrid(inspection.arrow_xs, inspection.arrow_ys)
     colours = plt.get_cmap("tab10")
@@ -361,10 +373,10 @@ def plot_inspection(
         unit = np.divide(move, length, out=np.zeros_like(move), where=length > 1e-6)
         arrows.quiver(
             grid_x, grid_y, unit[..., 0], unit[..., 1], color=colours(index % 10), angles="xy", scale=40, width=0.003,
-            label=f"from heading {heading_value:.2f}",
+            label=f"starting at heading {heading_value:.2f} rad",
         )
-    arrows.set_title("where the first plan from each state leads (unit arrows, one colour per start heading)")
-    arrows.legend(loc="lower right", fontsize=8)
+    arrows.set_title("Where the first plan from each state leads\n(one arrow colour per start heading; length not to scale)")
+    arrows.legend(loc="lower right", fontsize=8, framealpha=0.9)
     episodes_panel = panels[4]
     weight_map = plt.get_cmap("plasma")
     for episode in inspection.episodes:
@@ -376,21 +388,90 @@ def plot_inspection(
         episodes_panel.plot(episode.path[:, 0], episode.path[:, 1], color="k", lw=1.2)
         episodes_panel.plot(*episode.path[0], "o", color="k", ms=4)
         episodes_panel.plot(*episode.path[-1], "x", color="k", ms=7, mew=2)
+    starts = ", ".join(f"{key}={value}" for key, value in described["env_kwargs"].items()) or "default starts"
     episodes_panel.set_title(
-        f"{len(inspection.episodes)} deterministic episodes ({described['env_kwargs'] or 'default starts'}):\n"
-        "samples of every 20th step coloured by MPPI weight (bright: heavy)"
+        f"{len(inspection.episodes)} deterministic episodes ({starts}),\n"
+        f"with the roll-outs sampled every {described['every']} steps"
     )
-    panels[5].axis("off")
+    weights_bar = figure.colorbar(
+        plt.cm.ScalarMappable(cmap=weight_map), ax=episodes_panel, shrink=0.85,
+        label="roll-out weight / the step's heaviest weight",
+    )  # fmt: skip
+    weights_bar.ax.set_ylim(0, 1)
+    episodes_panel.plot([], [], color="k", lw=1.2, label="path driven")
+    episodes_panel.plot([], [], "o", color="k", ms=4, label="start")
+    episodes_panel.plot([], [], "x", color="k", ms=7, mew=2, label="end")
     for panel in panels[:5]:
         if goal is not None:
-            panel.plot(*goal, marker="*", color="gold", mec="k", ms=16, ls="none")
+            panel.plot(*goal, marker="*", color="gold", mec="k", ms=16, ls="none", label="goal")
         panel.set_xlim(inspection.xs[0], inspection.xs[-1])
         panel.set_ylim(inspection.ys[0], inspection.ys[-1])
         panel.set_aspect("equal")
+        panel.set_xlabel(axis_labels[0])
+        panel.set_ylabel(axis_labels[1])
         panel.grid(alpha=0.3)
-    if title:
-        figure.suptitle(title)
-    return save_figure(figure, path)
+    episodes_panel.legend(loc="lower right", fontsize=8, framealpha=0.9)
+    if demo_paths or goal is not None:
+        panels[0].legend(loc="lower right", fontsize=8, framealpha=0.9, facecolor="lightgrey")
+    _describe(panels[5], inspection)
+    figure.suptitle(title or "What a trained MPAIL planner has learned", fontsize=15)
+    return figure
+
+
+def _describe(panel, inspection: Inspection) -> None:
+    """The figure's reading guide: what was held fixed (the template state), and what each panel shows."""
+    described = inspection.description
+    template = ", ".join(f"{value:.3g}" for value in described["template"])
+    lines = [
+        "How to read this figure",
+        "",
+        "Every field varies only the position on the plane. The state's other",
+        "dimensions are those of one template state:",
+        f"[{template}]",
+    ]
+    if described["speed"] is not None:
+        lines.append(f"(the cost fields' forward speed {described['speed']:g}, or {-described['speed']:g} reversing)")
+    lines += [
+        "",
+        "Step costs: the learned cost c = -d(s, s') of applying the move once",
+        "from each position, through the planner's dynamics model.",
+        "Value: the learned terminal value at the end of each roll-out.",
+        "The planner prefers low cost and high value.",
+        "",
+        "Arrows: one deterministic planning step from a fresh plan at each",
+        "position, rolled out through the model: where it means to go.",
+        "",
+        "Episodes: the planner driving from the env's starts, with the",
+        "64 heaviest of its sampled roll-outs at every kept step.",
+    ]
+    if described["env_id"]:
+        lines += ["", f"env: {described['env_id']}"]
+    panel.text(0.0, 1.0, "\n".join(lines), va="top", ha="left", fontsize=11, transform=panel.transAxes, wrap=True)
+    panel.axis("off")
+
+
+def plot_inspection(
+    inspection: Inspection,
+    path: Union[str, Path],
+    demo_paths: Sequence[np.ndarray] = (),
+    goal: Tuple[float, float] | None = None,
+    title: str | None = None,
+    axis_labels: Tuple[str, str] = ("x", "y"),
+) -> Path:
+    """
+    Writes :func:`inspection_figure` as a PNG.
+
+    :param inspection: what :func:`inspect_model` returned
+    :param path: where to write the PNG
+    :param demo_paths: planar demo paths ``(T + 1, 2)`` drawn in white (cost panels) or grey
+    :param goal: a point to mark, e.g. the navigation goal
+    :param title: the figure's title
+    :param axis_labels: the names of the plane's two coordinates (with their units)
+    :return: the path written
+    """
+    from sb3_mpail.plotting import save_figure
+
+    return save_figure(inspection_figure(inspection, demo_paths, goal, title, axis_labels), path)
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
@@ -426,6 +507,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--arrow-resolution", type=int, default=15, help="arrows per side of the decision field")
     parser.add_argument("--n-headings", type=int, default=4, help="decision-field headings, evenly spaced from 0")
     parser.add_argument("--goal", type=float, nargs=2, default=[10.0, 10.0], help="point to mark")
+    parser.add_argument("--axis-names", nargs=2, default=["x (m)", "y (m)"], metavar=("X", "Y"),
+                        help="the plane's axis labels")  # fmt: skip
     parser.add_argument("--demos", default=None, help="demos (.npz) to draw (default: none)")
     return parser.parse_args(argv)
 
@@ -474,7 +557,8 @@ def main(argv: Sequence[str] | None = None) -> Path:
     if args.demos:
         demo_paths = [episode[:, [axes.x_index, axes.y_index]] for episode in load_demo_episodes(args.demos)]
     out = Path(args.out) if args.out else Path(args.model).with_name(Path(args.model).stem + "_inspect.png")
-    figure = plot_inspection(inspection, out, demo_paths, tuple(args.goal), title=f"{args.model}")
+    title = f"What the planner in {Path(args.model).name} has learned"
+    figure = plot_inspection(inspection, out, demo_paths, tuple(args.goal), title, tuple(args.axis_names))
     print(f"figure: {figure}")
     return figure
 

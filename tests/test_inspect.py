@@ -13,6 +13,7 @@ from sb3_mpail.inspect import (
     decision_field,
     grid_coordinates,
     inspect_model,
+    inspection_figure,
     main,
     plane_states,
     planned_episodes,
@@ -122,3 +123,33 @@ def test_command_line_draws_a_saved_model(tmp_path):
     model.save(tmp_path / "model.zip")
     figure = main([str(tmp_path / "model.zip"), "--episodes", "1", "--resolution", "11", "--arrow-resolution", "3"])
     assert figure == tmp_path / "model_inspect.png" and figure.stat().st_size > 20_000
+
+
+def test_inspection_figure_reads_without_the_docs(hand_made):
+    """Every panel has content, axis labels and a title inside the figure that overlaps no other text."""
+    template = np.zeros(12, np.float32)
+    template[5] = 0.3
+    inspection = inspect_model(
+        hand_made, template, [1.0, 0.0], [-1.0, 0.0], speed=3.0, extent=(-6.0, 6.0, -6.0, 6.0), resolution=9,
+        arrow_resolution=3, headings=(0.0, math.pi), env_id="sb3_mpail/Navigation-v0", n_episodes=1, every=50,
+    )  # fmt: skip
+    demo = np.stack([np.linspace(0, 4, 10), np.linspace(0, -3, 10)], axis=1)
+    figure = inspection_figure(inspection, [demo], goal=TARGET, axis_labels=("x (m)", "y (m)"))
+    renderer = figure.canvas.get_renderer()
+    figure.draw(renderer)
+    box = figure.bbox
+    panels = [axes for axes in figure.axes if axes.get_label() != "<colorbar>"]
+    assert len(panels) == 6
+    texts = [figure._suptitle] + [axes.title for axes in panels if axes.get_title()]
+    assert len(texts) == 6 and "MPAIL" in figure._suptitle.get_text()  # five panel titles and the figure's own
+    extents = [text.get_window_extent(renderer) for text in texts]
+    for text, extent in zip(texts, extents):
+        assert box.x0 <= extent.x0 and extent.x1 <= box.x1 and extent.y1 <= box.y1, text.get_text()
+    for first in range(len(extents)):
+        for second in range(first + 1, len(extents)):
+            assert not extents[first].overlaps(extents[second]), (texts[first].get_text(), texts[second].get_text())
+    for axes in panels[:5]:
+        assert axes.get_xlabel() == "x (m)" and axes.get_ylabel() == "y (m)"
+    guide = panels[5].texts[0].get_text()  # the sixth panel explains the template state and how to read the rest
+    assert "template state" in guide and "0.3" in guide
+    assert all(axes.get_ylabel() for axes in figure.axes if axes.get_label() == "<colorbar>")  # every colour bar says what
