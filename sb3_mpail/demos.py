@@ -26,7 +26,7 @@ import warnings
 import zipfile
 import zlib
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Dict, List, NamedTuple, Sequence, Tuple, Union
+from typing import TYPE_CHECKING, Any, Dict, List, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 from gymnasium import spaces
@@ -83,6 +83,28 @@ def _check_numeric(dtype: np.dtype, what: str) -> None:
         )
 
 
+def _float32(array: np.ndarray, what: str) -> np.ndarray:
+    """
+    ``array`` as float32, refusing finite values beyond float32's range, which the cast would make infinite (NaN and
+    infinite values are left to the finiteness check that follows).
+
+    :param array: numeric observations
+    :param what: what holds them, as the message names it
+    :raises ValueError: a finite value lies beyond float32's range
+    """
+    array = np.asarray(array)
+    largest = float(np.finfo(np.float32).max)
+    if array.dtype.kind == "f" and array.dtype.itemsize > 4:
+        magnitudes = np.abs(array[np.isfinite(array)])
+        if magnitudes.size > 0 and magnitudes.max() > largest:
+            raise ValueError(
+                f"{what} holds values beyond float32's range (+-{largest:.2g}), up to {magnitudes.max():g}: the networks "
+                "compute in float32, where they are infinite. Check the demos' units, and that they were recorded in "
+                "this environment."
+            )
+    return array.astype(np.float32)
+
+
 def _checked_episodes(episodes: Sequence[np.ndarray], source: str) -> List[np.ndarray]:
     """
     The episodes as float32 arrays, refusing none at all, non-numeric observations, episodes of fewer than two
@@ -109,7 +131,7 @@ def _checked_episodes(episodes: Sequence[np.ndarray], source: str) -> List[np.nd
             f"{source}: the episodes' observations differ in size ({sizes}). Every episode must come from the same "
             "environment, with the same observation space: drop the episodes recorded from another one."
         )
-    return [episode.astype(np.float32) for episode in episodes]
+    return [_float32(episode, f"{source}: episode {index}") for index, episode in enumerate(episodes)]
 
 
 def _read_npz(path: Path) -> Dict[str, np.ndarray]:
@@ -147,7 +169,14 @@ def _episodes_from_npz(path: Path) -> List[np.ndarray]:
     if "episode_lengths" in data:
         if observations.ndim != 2:
             raise ValueError(f"Demo file {path}: with episode_lengths, obs must be 2-D; got shape {observations.shape}.")
-        lengths = data["episode_lengths"].astype(int)
+        lengths = data["episode_lengths"].reshape(-1)
+        _check_numeric(lengths.dtype, f"Demo file {path}: episode_lengths")
+        if not np.all((lengths >= 1) & (lengths == np.round(lengths))):
+            raise ValueError(
+                f"Demo file {path}: episode_lengths must be positive whole numbers (each episode's number of observations, "
+                f"T + 1); got {lengths.tolist()}."
+            )
+        lengths = lengths.astype(int)
         if lengths.sum() != len(observations):
             raise ValueError(
                 f"Demo file {path}: episode_lengths sum to {lengths.sum()}, but obs has {len(observations)} rows."
@@ -214,6 +243,19 @@ def shipped_demo_info(name: str) -> Dict[str, Any]:
         families = sorted(info.stem for info in SHIPPED_DEMO_DIR.glob("*.json"))
         raise FileNotFoundError(f"No shipped demo family is named {name!r}; the shipped ones are {', '.join(families)}.")
     return json.loads(path.read_text())
+
+
+def shipped_family(demos: Any) -> Optional[str]:
+    """
+    The shipped demo family of ``demos`` when they name a shipped set (``"navigation_circling_4"`` ->
+    ``"navigation_circling"``), whose information file (:func:`shipped_demo_info`) the normalised score is measured
+    against; ``None`` for anything else (a path, a dataset, trajectories).
+
+    :param demos: demos as :class:`~sb3_mpail.MPAIL` takes them
+    """
+    if isinstance(demos, str) and demos in list_shipped_demos():
+        return _demo_set_order(demos)[0]
+    return None
 
 
 def _is_minari_dataset(demos: Any) -> bool:
@@ -330,7 +372,9 @@ def load_demos(
     if isinstance(demos, Transitions):
         for name in ("obs", "next_obs"):
             _check_numeric(np.asarray(getattr(demos, name)).dtype, f"The demo transitions' {name}")
-        transitions = ExpertTransitions(np.asarray(demos.obs, np.float32), np.asarray(demos.next_obs, np.float32))
+        transitions = ExpertTransitions(
+            *(_float32(getattr(demos, name), f"The demo transitions' {name}") for name in ("obs", "next_obs"))
+        )
     else:
         transitions = _pairs_from_episodes(load_demo_episodes(demos))
     expected = tuple(observation_space.shape)

@@ -28,7 +28,7 @@ from stable_baselines3.common.env_util import make_vec_env
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
 from sb3_mpail.console import HelpFormatter, program_name
-from sb3_mpail.demos import DemoSource, list_shipped_demos, load_demo_episodes, shipped_demo_info
+from sb3_mpail.demos import DemoSource, load_demo_episodes, shipped_demo_info, shipped_family
 from sb3_mpail.evaluation import evaluate_episodes, normalised_score, reference_returns
 from sb3_mpail.mpail import MPAIL
 from sb3_mpail.policies import MPPIPolicy
@@ -84,7 +84,7 @@ def reference_family(demos: DemoSource) -> str:
 
     :param demos: the demos trained on
     """
-    return demos.rsplit("_", 1)[0] if isinstance(demos, str) and demos in list_shipped_demos() else REFERENCE
+    return shipped_family(demos) or REFERENCE
 
 
 def reference_of(demos: DemoSource) -> Dict[str, Any]:

@@ -4,7 +4,7 @@ import subprocess
 import sys
 
 from sb3_mpail.demos import SHIPPED_DEMO_DIR
-from sb3_mpail.zoo import HYPERPARAMS, with_default_hyperparams
+from sb3_mpail.zoo import HYPERPARAMS, QUIET_LOG_INTERVAL, with_default_hyperparams
 
 CONFIG = """
 Pendulum-v1:
@@ -49,9 +49,12 @@ def test_zoo_train_with_normalize_true_is_refused_saying_why(tmp_path):
 def test_train_reads_the_shipped_hyperparameters_unless_a_file_is_named():
     assert HYPERPARAMS.is_file()
     defaulted = with_default_hyperparams(["train", "--algo", "mpail", "--env", "Pendulum-v1"])
-    assert defaulted == ["train", "--algo", "mpail", "--env", "Pendulum-v1", "--conf-file", str(HYPERPARAMS)]
-    named = ["train", "--algo", "mpail", "--env", "Pendulum-v1", "-conf", "mine.yml"]
+    quiet = ["--log-interval", str(QUIET_LOG_INTERVAL)]
+    assert defaulted == ["train", "--algo", "mpail", "--env", "Pendulum-v1", "--conf-file", str(HYPERPARAMS), *quiet]
+    named = ["train", "--algo", "mpail", "--env", "Pendulum-v1", "-conf", "mine.yml", "--log-interval", "1"]
     assert with_default_hyperparams(named) == named
+    scored = with_default_hyperparams([*named, "--score-episodes", "3"])  # sb3-mpail's option, not passed to rl_zoo3
+    assert scored == named
     for other in (["train", "--algo", "ppo", "--env", "Pendulum-v1"], ["enjoy", "--algo", "mpail", "--env", "Pendulum-v1"]):
         assert with_default_hyperparams(other) == other
 
@@ -61,3 +64,19 @@ def test_zoo_help_lists_its_scripts_and_an_unknown_script_is_named():
     assert helped.returncode == 0 and "{train,enjoy,record_video," in helped.stdout
     wrong = zoo("trian", "--algo", "mpail")
     assert wrong.returncode != 0 and "unknown script 'trian'" in wrong.stderr and "Traceback" not in wrong.stderr
+
+
+def test_zoo_train_is_quiet_and_ends_with_the_score_against_the_shipped_expert(tmp_path):
+    config = tmp_path / "mpail.yml"
+    config.write_text(CONFIG.format(demos="pendulum_4").replace("n_timesteps: 64", "n_timesteps: 640"))  # 20 iterations
+    trained = zoo("train", "--algo", "mpail", "--env", "Pendulum-v1", "-conf", str(config), "-f", str(tmp_path / "logs"),
+                  "--seed", "0", "--score-episodes", "2")  # fmt: skip
+    assert trained.returncode == 0, trained.stderr[-3000:]
+    lines = trained.stdout.strip().splitlines()
+    assert not [line for line in lines if "time/" in line]  # no per-iteration tables below the quiet interval
+    assert lines[-1].startswith("Pendulum-v1: deterministic planner over 2 episodes: return ")
+    assert "(expert -148.2, random -1243.2), normalised score " in lines[-1]  # pendulum.json's returns
+    loud = zoo("train", "--algo", "mpail", "--env", "Pendulum-v1", "-conf", str(config), "-f", str(tmp_path / "logs"),
+               "--seed", "0", "--score-episodes", "0", "--log-interval", "10", "-n", "320")  # fmt: skip
+    assert loud.returncode == 0, loud.stderr[-3000:]
+    assert sum("time/" in line for line in loud.stdout.splitlines()) == 1 and "normalised score" not in loud.stdout
