@@ -1,5 +1,6 @@
 """Checks that refuse bad input with an error naming it: constructor arguments, and per-env arrays that must be finite."""
 
+import inspect
 import math
 import numbers
 from collections.abc import Mapping, Sequence
@@ -31,10 +32,13 @@ POSITIVE_INTEGER = Rule("a positive integer", lambda value: _is_integer(value) a
 NON_NEGATIVE_INTEGER = Rule("a non-negative integer", lambda value: _is_integer(value) and value >= 0)
 #: a seed: a Python int (Python's ``random.seed`` refuses numpy's) or None
 SEED = Rule("a Python int or None", lambda value: value is None or (isinstance(value, int) and not isinstance(value, bool)))
+FINITE_NUMBER = Rule("a finite number", _is_number)
 POSITIVE_NUMBER = Rule("a finite number > 0", lambda value: _is_number(value) and value > 0)
 NON_NEGATIVE_NUMBER = Rule("a finite number >= 0", lambda value: _is_number(value) and value >= 0)
 UNIT_INTERVAL = Rule("a number in [0, 1]", lambda value: _is_number(value) and 0 <= value <= 1)
 FRACTION = Rule("a number in [0, 1)", lambda value: _is_number(value) and 0 <= value < 1)
+#: a factor that shrinks (or keeps) what it multiplies, never to 0: a decay
+DECAY_FACTOR = Rule("a number in (0, 1]", lambda value: _is_number(value) and 0 < value <= 1)
 BETAS = Rule(
     "two numbers in [0, 1)", lambda value: _is_sequence(value) and len(value) == 2 and all(map(FRACTION.holds, value))
 )
@@ -83,6 +87,31 @@ def check_arguments(**arguments: Tuple[Any, Rule]) -> None:
         raise ValueError(" ".join(errors))
 
 
+def check_signature(function: Callable, name: str, signature: str, n_arguments: int) -> None:
+    """
+    Refuses a callable that cannot be called with ``n_arguments`` positional arguments (for a module, its ``forward``),
+    naming the setting and the signature it must have. Callables without a signature Python can read are let through.
+
+    :param function: the callable given
+    :param name: the setting it was given as, which the message names (e.g. ``"step_cost"``)
+    :param signature: the signature expected, as the message shows it (e.g. ``"c(states, next_states) -> costs"``)
+    :param n_arguments: how many positional arguments it is called with
+    :raises TypeError: it cannot be called with that many
+    """
+    target = getattr(function, "forward", function)  # an nn.Module's own signature is (*args, **kwargs)
+    try:
+        parameters = inspect.signature(target)
+    except (TypeError, ValueError):  # builtins and some extension types have none
+        return
+    try:
+        parameters.bind(*range(n_arguments))
+    except TypeError as error:
+        qualname = getattr(target, "__qualname__", type(function).__qualname__)
+        raise TypeError(
+            f"{name} must be a callable {signature}; {qualname}{parameters} cannot be called so: {error}."
+        ) from None
+
+
 def check_finite(array: np.ndarray, what: str, advice: str) -> None:
     """
     Refuses a per-env batch holding NaN or infinite values, naming the envs whose rows hold them.
@@ -93,6 +122,8 @@ def check_finite(array: np.ndarray, what: str, advice: str) -> None:
     :param advice: what the user can do about it, appended to the message
     :raises ValueError: some env's row is not finite
     """
+    if len(array) == 0:  # no envs
+        return
     rows = np.asarray(array).reshape(len(array), -1)
     bad = np.flatnonzero(~np.isfinite(rows).all(axis=1))
     if len(bad) > 0:

@@ -9,8 +9,11 @@ import pathlib
 import sys
 import time
 import zipfile
+from collections.abc import Mapping
 from typing import Any, ClassVar, Dict, Iterable, List, Tuple, Type, TypeVar, Union
 
+import cloudpickle
+import gymnasium as gym
 import numpy as np
 import torch as th
 from gymnasium import spaces
@@ -38,13 +41,14 @@ from sb3_mpail.checks import (
     SEED,
     TIMESTEPS,
     UNIT_INTERVAL,
+    Rule,
     check_arguments,
     check_finite,
     one_of,
 )
 from sb3_mpail.demos import DemoSource, ExpertTransitions, load_demos
-from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, LearnedDynamics
-from sb3_mpail.policies import NON_FINITE_OBSERVATION, NON_FINITE_PLAN, MlpMPPI, MPPIPolicy
+from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, ENV_DYNAMICS_KWARGS, LearnedDynamics, how_to_give_dynamics
+from sb3_mpail.policies import NON_FINITE_OBSERVATION, MlpMPPI, MPPIPolicy
 from sb3_mpail.prior import PriorReplay
 
 SelfMPAIL = TypeVar("SelfMPAIL", bound="MPAIL")
@@ -56,6 +60,17 @@ _SETTING_ATTRIBUTES = {"temperature": "temperature_mode", "stats_window_size": "
 
 #: how the MPPI temperature can move (:class:`MPAIL`'s ``temperature``)
 TEMPERATURES = ("decay", "learned")
+
+#: what ``learn``'s ``callback`` may be, as Stable-Baselines3 takes it
+CALLBACK = Rule(
+    "None, a BaseCallback, a list of BaseCallbacks or a function f(locals, globals) -> bool",
+    lambda value: (
+        value is None
+        or isinstance(value, BaseCallback)
+        or (isinstance(value, list) and all(isinstance(item, BaseCallback) for item in value))
+        or callable(value)
+    ),
+)
 
 
 class MPAIL(BaseAlgorithm):
@@ -99,7 +114,7 @@ class MPAIL(BaseAlgorithm):
     :param initial_temperature: MPPI temperature ``lambda_0``
     :param temperature_decay: per-episode multiplicative decay: ``lambda = lambda_0 (1 - decay)^episodes``, counting
         episodes per env so the schedule does not depend on ``n_envs``
-    :param min_temperature: temperature floor
+    :param min_temperature: temperature floor, at most ``initial_temperature``
     :param temperature_learning_rate: RMSprop learning rate of the learned temperature's logarithm
     :param prior_buffer_size: transitions the policy prior's replay keeps (with ``policy_kwargs=dict(policy_prior=True)``)
     :param prior_batch_size: minibatch size of the prior's SAC updates
@@ -203,7 +218,8 @@ class MPAIL(BaseAlgorithm):
         if env is not None:
             self._check_spaces()
             _refuse_normalised_observations(self.env)
-            self._default_dynamics()
+            if _init_setup_model:  # not when loading: the file holds the model's own dynamics
+                self._default_dynamics()
         if _init_setup_model:
             self._setup_model()
         if demos is not None:
@@ -241,6 +257,12 @@ class MPAIL(BaseAlgorithm):
             verbose=(self.verbose, NON_NEGATIVE_INTEGER),
             seed=(self.seed, SEED),
         )
+        if self.min_temperature > self.initial_temperature:
+            raise ValueError(
+                f"min_temperature ({self.min_temperature}) must not exceed initial_temperature ({self.initial_temperature}): "
+                "the temperature starts at initial_temperature and never goes below min_temperature, which would leave "
+                "initial_temperature unused."
+            )
 
     def _check_spaces(self) -> None:
         if not isinstance(self.action_space, spaces.Box):
@@ -254,13 +276,39 @@ class MPAIL(BaseAlgorithm):
             )
 
     def _default_dynamics(self) -> None:
-        """Fills in the planning model of environments whose dynamics the package knows (e.g. ``Pendulum-v1``)."""
+        """
+        Fills in the planning model of environments whose dynamics the package knows (e.g. ``Pendulum-v1``), with the
+        settings it reads from the env (:data:`~sb3_mpail.mppi.dynamics.ENV_DYNAMICS_KWARGS`: Pendulum's ``g``) unless
+        ``dynamics_kwargs`` give them. An env wrapped in a gymnasium ``ObservationWrapper`` gets none: its observations
+        may no longer be the states the model reads (reordered, scaled).
+
+        :raises ValueError: the env's model is known, but the env's observations are wrapped
+        """
         if self.policy_kwargs.get("dynamics") is not None:
             return
         assert self.env is not None
         spec = self.env.get_attr("spec", indices=[0])[0]
-        if spec is not None and spec.id in DEFAULT_DYNAMICS:
-            self.policy_kwargs = {**self.policy_kwargs, "dynamics": DEFAULT_DYNAMICS[spec.id]}
+        if spec is None or spec.id not in DEFAULT_DYNAMICS:
+            return
+        name = DEFAULT_DYNAMICS[spec.id]
+        wrapped = [index for index, is_wrapped in enumerate(self.env.env_is_wrapped(gym.ObservationWrapper)) if is_wrapped]
+        if wrapped:
+            wrappers = self.env.env_method("__str__", indices=wrapped[:1])[0]
+            raise ValueError(
+                f"The environment {spec.id} (env {wrapped[0]}) is wrapped in a gymnasium ObservationWrapper ({wrappers}), "
+                f"which may change the observations that its dynamics model {name!r} reads as states, so the model is not "
+                f"chosen automatically: if the wrapper leaves them as they are, pass dynamics={name!r}; else "
+                f"{how_to_give_dynamics()}"
+            )
+        policy_kwargs = {**self.policy_kwargs, "dynamics": name}
+        from_env = {
+            keyword: self.env.env_method("get_wrapper_attr", attribute, indices=[0])[0]
+            for keyword, attribute in ENV_DYNAMICS_KWARGS.get(name, {}).items()
+        }
+        given = policy_kwargs.get("dynamics_kwargs")
+        if from_env and (given is None or isinstance(given, Mapping)):  # other kinds are refused by the policy, named
+            policy_kwargs["dynamics_kwargs"] = {**from_env, **(given or {})}
+        self.policy_kwargs = policy_kwargs
 
     def _setup_model(self) -> None:
         self._setup_lr_schedule()
@@ -364,10 +412,18 @@ class MPAIL(BaseAlgorithm):
         :param force_reset: reset ``env`` before training goes on
         :param kwargs: settings to change, e.g. ``n_steps``
         :raises FileNotFoundError: there is no such file
-        :raises ValueError: the file is empty, truncated, damaged or not a zip archive, or it is not an MPAIL model
+        :raises ValueError: the file is empty, truncated, damaged or not a zip archive, or it is not an MPAIL model;
+            ``kwargs`` hold a setting MPAIL does not have, ``demos`` or another ``temperature`` mode than the model's
         """
-        _check_model_file(path)
-        model = super().load(path, env, device, custom_objects, print_system_info, force_reset, **cls._load_settings(kwargs))
+        source, data = _check_model_file(path)
+        if "temperature" in kwargs and kwargs["temperature"] != data.get("temperature_mode"):
+            raise ValueError(
+                f"temperature is fixed when a model is made: this one's is {data.get('temperature_mode')!r}; got "
+                f"{kwargs['temperature']!r}. A learned temperature is saved with its optimiser, a decaying one is not: "
+                "train a new model to change it."
+            )
+        settings = cls._load_settings(kwargs)
+        model = super().load(source, env, device, custom_objects, print_system_info, force_reset, **settings)
         model._check_settings()
         return model
 
@@ -377,6 +433,11 @@ class MPAIL(BaseAlgorithm):
         ``load``'s settings as the attributes Stable-Baselines3 sets, refusing names that are no setting (which SB3
         would store as attributes nothing reads, e.g. a typo).
         """
+        if "demos" in settings:
+            raise ValueError(
+                "MPAIL.load takes no demos (they are never saved with the model): load it, then call "
+                "model.set_demos(demos) to go on training."
+            )
         not_settings = {"self", "policy", "env", "demos", "device", "_init_setup_model"}
         known = set(inspect.signature(cls.__init__).parameters) - not_settings
         unknown = sorted(set(settings) - known)
@@ -397,6 +458,7 @@ class MPAIL(BaseAlgorithm):
         link is followed (its target is written) and a read-only file is refused.
 
         :raises PermissionError: the destination is a read-only file
+        :raises TypeError: a ``policy_kwargs`` setting cannot be pickled (the message names it)
         """
         if isinstance(path, io.BufferedIOBase):
             super().save(path, exclude, include)
@@ -410,8 +472,12 @@ class MPAIL(BaseAlgorithm):
         destination.parent.mkdir(parents=True, exist_ok=True)
         partial = destination.with_name(destination.name + ".partial")
         try:
-            super().save(partial, exclude, include)
+            with open(partial, "wb") as file:  # closed whatever happens (Stable-Baselines3 leaves its own open on errors)
+                super().save(file, exclude, include)
             os.replace(partial, destination)
+        except Exception as error:
+            _raise_for_unpicklable_settings(self.policy_kwargs, error)
+            raise
         finally:
             partial.unlink(missing_ok=True)
 
@@ -430,7 +496,9 @@ class MPAIL(BaseAlgorithm):
         shorter rollout trains the value (and a learned model) but not the discriminator.
         """
         check_arguments(
-            total_timesteps=(total_timesteps, TIMESTEPS), log_interval=(log_interval, OPTIONAL_POSITIVE_INTEGER)
+            total_timesteps=(total_timesteps, TIMESTEPS),
+            callback=(callback, CALLBACK),
+            log_interval=(log_interval, OPTIONAL_POSITIVE_INTEGER),
         )
         total_timesteps = int(total_timesteps)
         if self.env is None:
@@ -482,13 +550,14 @@ class MPAIL(BaseAlgorithm):
         check_finite(self._last_obs, "The observation the environment returned", NON_FINITE_OBSERVATION)
         for _ in range(n_rollout_steps):
             fresh = th.as_tensor(self._last_episode_starts, device=self.device).view(-1, 1, 1)
-            self._plan = th.where(fresh, self.policy.initial_plan(env.num_envs), self._plan)
+            previous_plan = th.where(fresh, self.policy.initial_plan(env.num_envs), self._plan)
+            observations = self._tensor(self._last_obs)
             with th.no_grad():
-                actions, self._plan, costs = self.policy.plan_actions(self._tensor(self._last_obs), self._plan)
+                actions, self._plan, costs = self.policy.plan_actions(observations, previous_plan)
             if self.temperature_mode == "learned":
                 self._learn_temperature(costs)
             actions = actions.cpu().numpy()
-            check_finite(actions, "The action planned from a finite observation", NON_FINITE_PLAN)
+            self.policy.check_plan(actions, "The action planned from a finite observation", observations, previous_plan)
             new_obs, _, dones, infos = env.step(actions)
             check_finite(new_obs, "The observation the environment returned", NON_FINITE_OBSERVATION)
             self.num_timesteps += env.num_envs
@@ -700,28 +769,52 @@ def _refuse_normalised_observations(env: VecEnv) -> None:
     )
 
 
-def _check_model_file(path: Union[str, pathlib.Path, io.BufferedIOBase]) -> None:
+def _raise_for_unpicklable_settings(policy_kwargs: Dict[str, Any], error: Exception) -> None:
+    """
+    After ``save`` failed with ``error``: refuses the first ``policy_kwargs`` setting cloudpickle cannot pickle (what
+    Stable-Baselines3 saves them with), naming it; returns when they all pickle (``error`` has another cause).
+
+    :raises TypeError: a setting cannot be pickled
+    """
+    for key, value in policy_kwargs.items():
+        try:
+            cloudpickle.dumps(value)
+        except Exception as pickling_error:
+            raise TypeError(
+                f"policy_kwargs[{key!r}] (a {type(value).__name__}) cannot be saved: cloudpickle cannot pickle it "
+                f"({pickling_error}). Give an object that holds no locks, threads or open files (or define its "
+                "__getstate__); the file was not written."
+            ) from error
+
+
+def _check_model_file(path: Union[str, pathlib.Path, io.BufferedIOBase]) -> Tuple[Any, Dict[str, Any]]:
     """
     Refuses what :meth:`MPAIL.load` cannot load, naming the file and what is wrong with it.
 
     :param path: the model file (``.zip`` may be left out, as Stable-Baselines3 allows) or a file object
+    :return: what to load: the file (``path``, else ``<path>.zip``, also where ``path`` is a directory) or the file
+        object, and the model's settings (its ``data`` member)
     :raises FileNotFoundError: there is no such file
-    :raises ValueError: the file is empty, truncated, damaged or not a zip archive, or it is not an MPAIL model
+    :raises ValueError: the file is empty, truncated, damaged, not a zip archive or a directory, its settings are not
+        JSON, or it is not an MPAIL model
     """
     if isinstance(path, io.BufferedIOBase):
         name, source, start = getattr(path, "name", "<file object>"), path, path.tell()
     else:
         given = pathlib.Path(path)
-        name = source = given if given.exists() else given.with_name(given.name + ".zip")
-        if not source.exists():
-            raise FileNotFoundError(f"MPAIL model file {given} does not exist (nor {source}).")
+        with_zip = given.with_name(given.name + ".zip")
+        name = source = next((file for file in (given, with_zip) if file.is_file()), None)
+        if source is None and given.is_dir():
+            raise ValueError(f"MPAIL model file {given} is a directory, not a model file (and there is no {with_zip}).")
+        if source is None:
+            raise FileNotFoundError(f"MPAIL model file {given} does not exist (nor {with_zip}).")
         if source.stat().st_size == 0:
             raise ValueError(f"MPAIL model file {source} is empty (0 bytes): it was not saved whole.")
     try:
         with zipfile.ZipFile(source) as archive:
             members = archive.namelist()
             damaged = archive.testzip()
-            data = json.loads(archive.read("data")) if "data" in members and damaged is None else None
+            settings = archive.read("data") if "data" in members and damaged is None else None
     except (zipfile.BadZipFile, EOFError, OSError, ValueError) as error:
         raise ValueError(f"MPAIL model file {name} is truncated or not a zip archive ({error}).") from error
     finally:
@@ -729,6 +822,13 @@ def _check_model_file(path: Union[str, pathlib.Path, io.BufferedIOBase]) -> None
             path.seek(start)
     if damaged is not None:
         raise ValueError(f"MPAIL model file {name} is damaged: its member {damaged} fails its CRC check (corrupted data).")
+    try:
+        data = None if settings is None else json.loads(settings)
+    except ValueError as error:  # not JSON, or not text
+        raise ValueError(
+            f"MPAIL model file {name}: its 'data' member (the model's settings) is not JSON ({error}): the file was not "
+            "written by MPAIL.save, or was changed since."
+        ) from error
     if data is None or "policy.pth" not in members:
         raise ValueError(
             f"MPAIL model file {name} is truncated or not saved by Stable-Baselines3: it lacks the 'data' or 'policy.pth' "
@@ -741,3 +841,4 @@ def _check_model_file(path: Union[str, pathlib.Path, io.BufferedIOBase]) -> None
             f"Model file {name} is not an MPAIL model: it lacks MPAIL's settings {missing}, and its policy class comes from "
             f"{policy_module}. Load it with the algorithm that saved it."
         )
+    return source, data

@@ -17,6 +17,7 @@ from sb3_mpail.checks import (
     POSITIVE_NUMBER,
     check_arguments,
     check_finite,
+    check_signature,
     per_action_dimension,
 )
 from sb3_mpail.mppi.constraints import make_constraint_cost
@@ -84,13 +85,16 @@ class MPPIPolicy(BasePolicy):
         :class:`~sb3_mpail.mppi.sampling.DeltaSampler`, ``noise_std`` its increments' std) or a module
         ``sampler(plan, n_samples, generator)`` returning time-major action sequences clamped to the bounds
     :param sampler_kwargs: keyword arguments of a named sampler (e.g. ``max_delta`` of ``"delta"``)
-    :param step_cost: replaces the discriminator cost in the planner: ``c(states, next_states)`` over any leading shape
-    :param terminal_value: replaces the learned value in the planner: ``V(states)`` over any leading shape
+    :param step_cost: replaces the discriminator cost in the planner: ``c(states, next_states)`` over any leading shape,
+        real numbers (cast to the states' dtype; booleans are refused)
+    :param terminal_value: replaces the learned value in the planner: ``V(states)`` over any leading shape, real numbers
+        (cast like ``step_cost``'s)
     :param constraint_cost: a known cost ``g(states)`` over any leading shape (one number per state), added to the
         learned costs of every state a roll-out reaches: what a designer knows that the dynamics model does not, such
         as walls and obstacles (e.g. :class:`~sb3_mpail.mppi.constraints.RectangleObstacles`), or the name of a ready
         one (``"parking_walls"``, :data:`~sb3_mpail.mppi.constraints.CONSTRAINT_COSTS`); never learned, saved with the
-        model like ``step_cost``
+        model like ``step_cost``. Flags (booleans) count as 0 and 1. An infinite cost drops the samples that pay it,
+        but where every sample of an env pays one there is no plan: :meth:`predict` refuses it, naming the env
     :param compile_planner: compile the planner's roll-out/cost/weight update with ``torch.compile``: ``False``
         (default), ``True`` or a ``torch.compile`` mode (``"reduce-overhead"`` uses CUDA graphs on a GPU); same plans
     :param policy_prior: learned-model MPAIL's policy prior (:class:`~sb3_mpail.prior.PolicyPrior`, trained off-policy
@@ -106,6 +110,8 @@ class MPPIPolicy(BasePolicy):
     :param min_input_scale: the floor of each standardised input's scale (``1``: inputs that vary less than one unit
         in the demos are only centred)
     :raises ValueError: a setting is out of its range (each is named)
+    :raises TypeError: ``step_cost``, ``terminal_value``, ``constraint_cost`` or ``dynamics`` cannot be called with the
+        arguments the planner gives it
     """
 
     def __init__(
@@ -164,6 +170,10 @@ class MPPIPolicy(BasePolicy):
             standardise_inputs=(standardise_inputs, BOOLEAN),
             min_input_scale=(min_input_scale, POSITIVE_NUMBER),
         )
+        if step_cost is not None:
+            check_signature(step_cost, "step_cost", "c(states, next_states) -> costs", 2)
+        if terminal_value is not None:
+            check_signature(terminal_value, "terminal_value", "V(states) -> values", 1)
         self._constructor_kwargs = dict(
             dynamics=dynamics,
             dynamics_kwargs=dynamics_kwargs,
@@ -232,7 +242,7 @@ class MPPIPolicy(BasePolicy):
             compile_planner=compile_planner,
             prior=self.prior,
             n_proposals=n_proposals,
-            constraint_cost=make_constraint_cost(constraint_cost),
+            constraint_cost=make_constraint_cost(constraint_cost, observation_space.shape[0]),
         )
         self.register_buffer("temperature", th.tensor(1.0))
         self.register_buffer("action_low", th.as_tensor(low))
@@ -295,7 +305,8 @@ class MPPIPolicy(BasePolicy):
     ) -> Tuple[th.Tensor, th.Tensor]:
         """
         Plans from each env's state and picks the action to execute (paper Alg. 3): the plan's first action when
-        deterministic, else a sample from ``N(first action, weighted std)``, clamped to the bounds.
+        deterministic, else a sample from ``N(first action, weighted std)``; the plan and the action are clamped to the
+        bounds, whatever the sampler.
 
         :param observations: ``(n_envs, state_dim)``
         :param previous_plan: ``(n_envs, horizon, action_dim)``
@@ -315,12 +326,14 @@ class MPPIPolicy(BasePolicy):
         """
         generator = self.generator(deterministic)
         last = self.planner.optimise(observations.float(), previous_plan, self.temperature, generator)
-        actions = last.plan[:, 0]
+        # a user's sampler may not clamp its samples (and a weighted mean may pass a bound by a rounding error)
+        plan = th.clamp(last.plan, self.action_low, self.action_high)
+        actions = plan[:, 0]
         if not deterministic:
             action_std = weighted_action_std(last.weights, last.samples, last.plan)
             noise = th.randn(actions.shape, generator=generator, device=actions.device, dtype=actions.dtype)
             actions = th.clamp(actions + action_std * noise, self.action_low, self.action_high)
-        return actions, last.plan, last.costs
+        return actions, plan, last.costs
 
     def forward(self, obs: th.Tensor, deterministic: bool = False) -> th.Tensor:
         return self._predict(obs, deterministic)
@@ -344,15 +357,28 @@ class MPPIPolicy(BasePolicy):
         :param episode_start: per env, whether its episode just started (its plan is reset)
         :param deterministic: execute the plan's first action instead of sampling around it
         :return: the actions and the plans to pass back as ``state`` on the next call
-        :raises ValueError: an observation or ``state`` holds NaN or infinite values, an observation holds values beyond
-            ``LARGE_OBSERVATION``, or the planner made a non-finite plan (the error names the env); ``state`` is not
-            plans of this model's shape; ``episode_start`` is not one flag per env
+        :raises ValueError: an observation, ``state`` or ``episode_start`` holds NaN or infinite values, an observation
+            holds complex numbers or values beyond ``LARGE_OBSERVATION``, or the planner made a non-finite plan (the error
+            names the env, and the cause where it finds one); ``state`` is not plans of this model's shape;
+            ``episode_start`` is not one flag per env
         """
         self.set_training_mode(False)
+        is_complex = observation.is_complex() if isinstance(observation, th.Tensor) else np.iscomplexobj(observation)
+        if is_complex:
+            dtype = str(getattr(observation, "dtype", np.asarray(observation).dtype)).replace("torch.", "")
+            raise ValueError(
+                f"The observation passed to predict holds complex numbers ({dtype}): "
+                "planning on their real parts would drop the imaginary parts. Pass real observations (e.g. the real and "
+                "imaginary parts as separate dimensions, as the environment gives them)."
+            )
         observations, vectorized = self.obs_to_tensor(observation)
         n_envs = observations.shape[0]
         fresh = self.initial_plan(n_envs)
-        if n_envs == 0:  # an empty batch: no actions, no plans
+        if n_envs == 0:  # an empty batch: no actions, no plans (a state and episode_start given are checked all the same)
+            if state is not None:
+                self._previous_plan(state, fresh)
+            if episode_start is not None:
+                self._episode_starts(episode_start, n_envs, vectorized)
             return np.zeros((0, *self.action_space.shape), np.float32), fresh.cpu().numpy()
         raw = np.asarray(observation).reshape(n_envs, -1)
         check_finite(raw, "The observation passed to predict", NON_FINITE_OBSERVATION)
@@ -364,15 +390,31 @@ class MPPIPolicy(BasePolicy):
                 "overflow. Check the environment's units, or scale its observations."
             )
         with th.no_grad():
-            plan = fresh if state is None else self._previous_plan(state, fresh)
+            previous_plan = fresh if state is None else self._previous_plan(state, fresh)
             if episode_start is not None:
-                plan = th.where(self._episode_starts(episode_start, n_envs, vectorized), fresh, plan)
-            actions, plan = self.act(observations, plan, deterministic)
+                previous_plan = th.where(self._episode_starts(episode_start, n_envs, vectorized), fresh, previous_plan)
+            actions, plan = self.act(observations, previous_plan, deterministic)
         actions, plan = actions.cpu().numpy(), plan.cpu().numpy()
-        check_finite(plan, "The plan made from a finite observation and state", NON_FINITE_PLAN)
+        self.check_plan(plan, "The plan made from a finite observation and state", observations, previous_plan)
         if not vectorized:
             actions = actions.squeeze(axis=0)
         return actions, plan
+
+    def check_plan(self, plan: np.ndarray, what: str, observations: th.Tensor, previous_plan: th.Tensor) -> None:
+        """
+        Refuses a non-finite plan (or action) the planner made from finite ``observations`` and ``previous_plan``,
+        naming the envs and the cause where it finds one (:meth:`~sb3_mpail.mppi.planner.MPPIPlanner.non_finite_cause`,
+        run only for a non-finite plan).
+
+        :param plan: the plans or actions made, one row per env (on the host)
+        :param what: what they are, as the message names them
+        :param observations: the states planned from, ``(n_envs, state_dim)``
+        :param previous_plan: the plans planned from, ``(n_envs, horizon, action_dim)``
+        :raises ValueError: ``plan`` holds NaN or infinite values
+        """
+        if not np.isfinite(plan).all():
+            cause = self.planner.non_finite_cause(observations.float(), previous_plan)
+            check_finite(plan, what, cause or NON_FINITE_PLAN)
 
     def _previous_plan(self, state: np.ndarray, fresh: th.Tensor) -> th.Tensor:
         """``predict``'s ``state``, checked to be plans of the right shape and finite, as a tensor."""
@@ -394,6 +436,7 @@ class MPPIPolicy(BasePolicy):
                 f"episode_start must hold one flag per env ({n_envs}, shape ({n_envs},)); got {starts.dtype} of shape "
                 f"{starts.shape}: {starts!r}."
             )
+        check_finite(starts.reshape(n_envs, 1), "The episode_start passed to predict", "pass True or False per env.")
         return th.as_tensor(starts.astype(bool).reshape(n_envs, 1, 1), device=self.device)
 
 MlpMPPI = MPPIPolicy

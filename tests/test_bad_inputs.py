@@ -1,9 +1,13 @@
 """Every bad input is refused with an error that names it and says what is wrong; nothing non-finite is carried on."""
 
+import gc
 import io
 import re
 import subprocess
 import sys
+import threading
+import warnings
+import zipfile
 
 import gymnasium as gym
 import numpy as np
@@ -19,6 +23,7 @@ from torch import nn
 
 from sb3_mpail import MPAIL
 from sb3_mpail.demos import load_demos
+from sb3_mpail.mppi.sampling import ActionSampler
 from sb3_mpail.policies import MPPIPolicy
 
 OBSERVATION_SPACE = spaces.Box(-np.inf, np.inf, (3,), np.float32)
@@ -489,3 +494,144 @@ def test_a_users_cost_or_value_of_the_wrong_shape_is_refused_naming_it(demos, se
     expected = rf"{setting} must return a torch tensor of one number per state, shape \(3?,? ?1, 16\)"
     with pytest.raises(ValueError, match=expected):
         model.predict(np.zeros(3, np.float32))
+
+
+# --- held-out probes: settings and inputs once taken silently or crashing unclearly
+
+
+class SinCosSwapped(gym.ObservationWrapper):
+    """Pendulum's observation reordered to ``[sin, cos, w]``: the spec id is Pendulum-v1's, the state is not."""
+
+    def observation(self, observation):
+        return observation[[1, 0, 2]]
+
+
+def test_the_automatic_pendulum_model_plans_with_the_env_s_gravity(demos):
+    env = make_vec_env("Pendulum-v1", n_envs=1, env_kwargs=dict(g=5.0))
+    assert MPAIL("MlpMPPI", env, demos, policy_kwargs=TINY_PLANNER).policy.dynamics.gravity == 5.0
+    given = dict(TINY_PLANNER, dynamics_kwargs=dict(gravity=7.0))  # the user's own setting wins
+    assert MPAIL("MlpMPPI", env, demos, policy_kwargs=given).policy.dynamics.gravity == 7.0
+    assert MPAIL("MlpMPPI", "Pendulum-v1", policy_kwargs=TINY_PLANNER).policy.dynamics.gravity == 10.0
+
+
+def test_an_env_with_an_observation_wrapper_gets_no_automatic_model_and_is_told_how_to_give_one(demos):
+    env = make_vec_env("Pendulum-v1", n_envs=1, wrapper_class=SinCosSwapped)
+    with pytest.raises(ValueError, match=r"wrapped in a gymnasium ObservationWrapper \(.*SinCosSwapped.*\).*"
+                                         r"pass policy_kwargs=dict\(dynamics=\.\.\.\)"):  # fmt: skip
+        MPAIL("MlpMPPI", env, demos, policy_kwargs=TINY_PLANNER)
+    chosen = MPAIL("MlpMPPI", env, demos, policy_kwargs=dict(TINY_PLANNER, dynamics="learned"))
+    assert type(chosen.policy.dynamics).__name__ == "LearnedDynamics"
+
+
+@pytest.mark.parametrize("max_delta", [[0.2, 0.2], float("nan"), 0.0, "0.2"])
+def test_a_delta_sampler_s_max_delta_must_be_positive_and_one_per_action_dimension(max_delta):
+    expected = "a finite number > 0, or a sequence of such values, one per action dimension (1)"
+    with pytest.raises(ValueError, match=refusal("max_delta", max_delta, expected)):
+        MPAIL("MlpMPPI", "Pendulum-v1", policy_kwargs=dict(sampler="delta", sampler_kwargs=dict(max_delta=max_delta)))
+
+
+def test_a_min_temperature_above_the_initial_temperature_is_refused_naming_both():
+    with pytest.raises(ValueError, match=r"min_temperature \(10.0\) must not exceed initial_temperature \(1.0\)"):
+        MPAIL("MlpMPPI", "Pendulum-v1", initial_temperature=1.0, min_temperature=10.0)
+
+
+def test_predict_refuses_a_nan_episode_start_flag_naming_its_env(model):
+    with pytest.raises(ValueError, match=r"The episode_start passed to predict holds NaN or infinite values for env 0"):
+        model.predict(np.zeros((2, 3), np.float32), episode_start=[np.nan, 0.0])
+
+
+def test_predict_refuses_complex_observations_rather_than_dropping_their_imaginary_parts(model):
+    with pytest.raises(ValueError, match=r"The observation passed to predict holds complex numbers \(complex64\)"):
+        model.predict(np.zeros(3, np.complex64) + 5j)
+
+
+def test_a_users_float64_step_cost_is_cast_to_the_planner_s_dtype_and_a_bool_one_refused_naming_it(demos):
+    observation = np.array([1.0, 0.0, 0.5], np.float32)
+    in_float32 = make_model(demos, policy_kwargs=dict(TINY_PLANNER, step_cost=lambda s, ns: ns[..., 2].square()))
+    in_float64 = make_model(demos, policy_kwargs=dict(TINY_PLANNER, step_cost=lambda s, ns: ns[..., 2].double().square()))
+    expected = in_float32.predict(observation, deterministic=True)[0]
+    np.testing.assert_allclose(in_float64.predict(observation, deterministic=True)[0], expected, atol=1e-5)
+    flags = make_model(demos, policy_kwargs=dict(TINY_PLANNER, step_cost=lambda s, ns: ns[..., 2] > 0))
+    with pytest.raises(ValueError, match=r"step_cost must return real numbers .*; got dtype torch.bool"):
+        flags.predict(observation)
+
+
+def test_a_step_cost_taking_the_wrong_number_of_arguments_is_refused_naming_it_and_the_signature():
+    with pytest.raises(TypeError, match=r"step_cost must be a callable c\(states, next_states\) -> costs; .*<lambda>"
+                                        r"\(states\) cannot be called so"):  # fmt: skip
+        MPPIPolicy(OBSERVATION_SPACE, spaces.Box(-2, 2, (1,), np.float32), "pendulum", step_cost=lambda states: states[..., 0])
+
+
+class SampleMajorSampler(ActionSampler):
+    """A user's sampler returning ``(n_envs, n_samples, horizon, action_dim)`` instead of time-major samples."""
+
+    def forward(self, plan, n_samples, generator):
+        noise = self.standard_noise(plan, n_samples, generator)
+        return (noise + plan.transpose(0, 1).unsqueeze(2)).clamp(-2, 2).permute(1, 2, 0, 3)
+
+
+def test_a_sampler_returning_the_wrong_shape_is_refused_naming_the_shape_expected(demos):
+    sampler = SampleMajorSampler(np.array([-2.0]), np.array([2.0]))
+    model = make_model(demos, policy_kwargs=dict(TINY_PLANNER, sampler=sampler))
+    expected = "sampler must return (H, n_envs, N, A) = (3, 1, 16, 1) action sequences; got shape (1, 16, 3, 1)"
+    with pytest.raises(ValueError, match=re.escape(expected)):
+        model.predict(np.zeros(3, np.float32))
+
+
+@pytest.mark.parametrize("callback", ["eval", 3, [lambda locals_, globals_: True]])
+def test_learn_refuses_a_callback_that_is_not_one_naming_it(model, callback):
+    expected = "None, a BaseCallback, a list of BaseCallbacks or a function f(locals, globals) -> bool"
+    with pytest.raises(ValueError, match=refusal("callback", callback, expected)):
+        model.learn(16, callback=callback)
+
+
+def test_load_with_demos_says_to_set_them_after_loading(model_file, demos):
+    with pytest.raises(ValueError, match=r"MPAIL.load takes no demos .* model.set_demos\(demos\)"):
+        MPAIL.load(model_file, demos=demos)
+
+
+def test_load_refuses_to_switch_the_temperature_mode_saying_it_is_fixed_at_training(model_file):
+    with pytest.raises(ValueError, match=r"temperature is fixed when a model is made: this one's is 'decay'; got 'learned'"):
+        MPAIL.load(model_file, temperature="learned")
+    assert MPAIL.load(model_file, temperature="decay").temperature_mode == "decay"
+
+
+def test_load_finds_the_zip_file_beside_a_directory_of_the_same_name(model, tmp_path):
+    (tmp_path / "m").mkdir()
+    model.save(tmp_path / "m")
+    MPAIL.load(tmp_path / "m")
+    (tmp_path / "d").mkdir()
+    with pytest.raises(ValueError, match=f"MPAIL model file {tmp_path / 'd'} is a directory, not a model file"):
+        MPAIL.load(tmp_path / "d")
+
+
+def test_load_of_a_file_whose_data_member_is_not_json_says_so(model_file, tmp_path):
+    path = tmp_path / "bad_json.zip"
+    with zipfile.ZipFile(model_file) as source, zipfile.ZipFile(path, "w") as target:
+        for item in source.infolist():
+            target.writestr(item, b"{not json" if item.filename == "data" else source.read(item.filename))
+    with pytest.raises(ValueError, match=re.escape(f"MPAIL model file {path}: its 'data' member (the model's settings) is "
+                                                   "not JSON")):  # fmt: skip
+        MPAIL.load(path)
+
+
+class LockedCost(nn.Module):
+    """A step cost holding a lock: cloudpickle cannot save it."""
+
+    def __init__(self):
+        super().__init__()
+        self.lock = threading.Lock()
+
+    def forward(self, states, next_states):
+        return next_states[..., 2].square()
+
+
+def test_save_of_an_unpicklable_policy_setting_names_it_and_leaves_no_file_open(demos, tmp_path):
+    model = make_model(demos, policy_kwargs=dict(TINY_PLANNER, step_cost=LockedCost()))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(TypeError, match=r"policy_kwargs\['step_cost'\] \(a LockedCost\) cannot be saved"):
+            model.save(tmp_path / "locked")
+        gc.collect()  # an unclosed file is reported when it is collected
+    assert [str(warning.message) for warning in caught if issubclass(warning.category, ResourceWarning)] == []
+    assert list(tmp_path.iterdir()) == []

@@ -3,10 +3,12 @@
 import numpy as np
 import pytest
 import torch as th
+from gymnasium import spaces
 from test_planner_equivalence import NAVIGATION, assert_same_plans, make_policy, navigation_states, plan_both_ways
 
 from sb3_mpail.mppi.constraints import RectangleObstacles, highway_env_obstacles
 from sb3_mpail.mppi.planner import rollout
+from sb3_mpail.policies import MPPIPolicy
 
 #: a wall 2 m thick across the x axis at x = 5, from y = -10 to 10
 WALL = dict(centres=[[5.0, 0.0]], half_sizes=[[1.0, 10.0]], margin=0.5, weight=100.0)
@@ -112,3 +114,38 @@ def test_parking_walls_are_named_for_a_yaml_file_and_an_unknown_name_is_refused(
         make_constraint_cost("walls")
     with pytest.raises(ValueError, match="constraint_cost must be"):
         make_constraint_cost(3.0)
+
+
+#: Pendulum's spaces, for planners built without an env
+PENDULUM_SPACES = (spaces.Box(-8.0, 8.0, (3,), np.float32), spaces.Box(-2.0, 2.0, (1,), np.float32))
+
+
+def pendulum_policy(constraint_cost) -> MPPIPolicy:
+    return MPPIPolicy(*PENDULUM_SPACES, dynamics="pendulum", n_samples=16, horizon=3, n_iterations=2,
+                      constraint_cost=constraint_cost)  # fmt: skip
+
+
+def test_a_constraint_cost_returning_nan_is_named_as_the_source_of_a_non_finite_plan():
+    policy = pendulum_policy(lambda states: states[..., 0] * float("nan"))
+    with pytest.raises(ValueError, match=r"The plan made from a finite observation and state holds NaN .* for envs \[0, 1\] "
+                                         r".*constraint_cost returned NaN for envs \[0, 1\]"):  # fmt: skip
+        policy.predict(np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], np.float32))
+
+
+def test_a_constraint_infinite_for_every_sample_of_an_env_is_reported_as_leaving_no_feasible_sample():
+    policy = pendulum_policy(lambda states: th.where(states[..., 2] > 1.0, float("inf"), 0.0))
+    upright, spinning = [1.0, 0.0, 0.0], [1.0, 0.0, 5.0]  # every sample of the spinning pendulum keeps w > 1
+    actions, _ = policy.predict(np.array([upright], np.float32), deterministic=True)  # some samples are feasible
+    assert np.isfinite(actions).all()
+    with pytest.raises(ValueError, match=r"for env 1: .*every sampled sequence of env 1 has an infinite cost \(no feasible "
+                                         r"sample\): constraint_cost is infinite on each"):  # fmt: skip
+        policy.predict(np.array([upright, spinning], np.float32), deterministic=True)
+
+
+def test_rectangle_indices_out_of_range_for_the_state_are_refused_naming_them_and_the_state_size():
+    obstacles = RectangleObstacles(**WALL, x_index=5)
+    expected = r"RectangleObstacles' x_index=5 is out of range for the 3-D state \(indices in \[-3, 3\)\)"
+    with pytest.raises(ValueError, match=expected):  # when the planner is built
+        pendulum_policy(obstacles)
+    with pytest.raises(ValueError, match=expected):  # used on its own: at its first call
+        obstacles(th.zeros(4, 3))

@@ -107,3 +107,22 @@ def test_demos_of_huge_magnitude_are_warned_of_as_exploding_the_discriminator_s_
         r"the discriminator's loss explode .* Check the demos' units",
     ):
         load_demos([trajectory(first), trajectory(second)], UNBOUNDED)
+
+
+@pytest.mark.parametrize("lengths", [[-2, 14], [0, 12], [6, 5.5, 0.5]], ids=["negative", "zero", "fractional"])
+def test_npz_episode_lengths_that_are_not_positive_whole_numbers_are_refused_naming_them(tmp_path, lengths):
+    path = tmp_path / "demos.npz"
+    np.savez(path, obs=np.concatenate(episodes()), episode_lengths=np.array(lengths))  # 12 rows, as the lengths sum to
+    with pytest.raises(ValueError, match=re.escape(f"Demo file {path}: episode_lengths must be positive whole numbers (each "
+                                                   "episode's number of observations, T + 1); got [")):  # fmt: skip
+        load_demos(path, UNBOUNDED)
+
+
+def test_demo_values_beyond_float32_s_range_are_refused_saying_so_rather_than_called_infinite():
+    first, second = (episode.astype(np.float64) for episode in episodes())
+    first[3, 2] = 1e39  # finite in float64, infinite in float32
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # nor numpy's overflow warning
+        with pytest.raises(ValueError, match=r"The sequence of demo trajectories: episode 0 holds values beyond float32's "
+                                             r"range \(\+-3.4e\+38\), up to 1e\+39"):  # fmt: skip
+            load_demos([trajectory(first), trajectory(second)], UNBOUNDED)

@@ -10,6 +10,7 @@ from test_mpail import make_model, pendulum_trajectories
 
 from sb3_mpail import MPAIL
 from sb3_mpail.mppi import fused
+from sb3_mpail.mppi.sampling import ActionSampler
 
 N_THREADS = 4
 N_CALLS = 24
@@ -91,3 +92,32 @@ def test_predict_from_several_threads_gives_what_sequential_calls_give(model, pl
 def test_an_empty_batch_of_observations_gets_an_empty_answer(model):
     actions, plans = model.predict(np.zeros((0, 3), np.float32))
     assert actions.shape == (0, 1) and plans.shape == (0, 5, 1)
+
+
+def test_an_empty_batch_still_checks_its_state_and_episode_start(model):
+    empty = np.zeros((0, 3), np.float32)
+    _, plans = model.predict(np.zeros((2, 3), np.float32))
+    with pytest.raises(ValueError, match=r"state must be the plans returned by predict, numbers of shape \(0, 5, 1\); got "
+                                         r"float32 of shape \(2, 5, 1\)"):  # fmt: skip
+        model.predict(empty, state=plans)
+    with pytest.raises(ValueError, match=r"episode_start must hold one flag per env \(0, shape \(0,\)\)"):
+        model.predict(empty, episode_start=[True, False])
+    actions, plans = model.predict(empty, state=plans[:0], episode_start=np.zeros(0, bool))
+    assert actions.shape == (0, 1) and plans.shape == (0, 5, 1)
+
+
+class UnclampedSampler(ActionSampler):
+    """A user's sampler that forgets to clamp its samples to the bounds: the plan plus 3 N(0, 1)."""
+
+    def forward(self, plan, n_samples, generator):
+        return self.standard_noise(plan, n_samples, generator).mul_(3.0).add_(plan.transpose(0, 1).unsqueeze(2))
+
+
+@pytest.mark.parametrize("deterministic", [True, False])
+def test_actions_and_plans_stay_within_the_bounds_whatever_the_sampler(demos, deterministic):
+    sampler = UnclampedSampler(np.array([-2.0]), np.array([2.0]))
+    model = make_model(demos, policy_kwargs=dict(n_samples=2, horizon=4, n_iterations=2, sampler=sampler))
+    plans = None
+    for observations in observation_batches(n_calls=4):
+        actions, plans = model.predict(observations, state=plans, deterministic=deterministic)
+        assert np.abs(actions).max() <= 2.0 and np.abs(plans).max() <= 2.0

@@ -65,6 +65,15 @@ def test_negative_state_indices_count_from_the_end_as_in_python():
     assert th.equal(selection(th.tensor([[1.0, 2.0, 3.0]])), th.tensor([[3.0]]))
 
 
+@pytest.mark.parametrize(
+    "features, dtype", [(lambda states: states[:, :2].double(), "torch.float64"), (lambda states: states > 0, "torch.bool")]
+)
+def test_feature_maps_of_another_dtype_than_the_states_are_refused_naming_the_setting_and_the_dtype(features, dtype):
+    with pytest.raises(ValueError, match=rf"discriminator_features must return features of the states' dtype \(torch.float32 "
+                                         rf"here\); for float32 states it gave {dtype}"):  # fmt: skip
+        features_space(features, "discriminator_features")
+
+
 def test_a_bad_feature_map_is_reported_under_the_setting_it_was_given_as():
     with pytest.raises(TypeError, match="value_features must be an nn.Module, a callable or a list of state indices"):
         FeatureMap.wrap(3.0, "value_features")
@@ -90,6 +99,26 @@ def test_learned_dynamics_that_would_never_be_fitted_are_refused_naming_the_sett
         make_dynamics("learned", STATES_3D, ACTIONS_1D, {setting: value})
 
 
+@pytest.mark.parametrize(
+    "setting, value, expected",
+    [
+        ("learning_rate", 0.0, "learning_rate must be a finite number > 0; got 0.0"),
+        ("learning_rate", -1e-3, "learning_rate must be a finite number > 0; got -0.001"),
+        ("learning_rate", "1e-3", "learning_rate must be a finite number > 0; got '1e-3'"),  # what YAML makes of 1e-3
+        ("lr_decay", 2.0, r"lr_decay must be a number in \(0, 1\]; got 2.0"),
+        ("lr_decay", 0.0, r"lr_decay must be a number in \(0, 1\]; got 0.0"),
+    ],
+)
+def test_learned_dynamics_rates_that_cannot_train_or_that_grow_are_refused_naming_the_setting(setting, value, expected):
+    with pytest.raises(ValueError, match=expected):
+        make_dynamics("learned", STATES_3D, ACTIONS_1D, {setting: value})
+
+
+def test_a_pendulum_gravity_that_is_not_a_number_is_refused_naming_it():
+    with pytest.raises(ValueError, match="gravity must be a finite number; got '10'"):
+        make_dynamics("pendulum", STATES_3D, ACTIONS_1D, dict(gravity="10"))
+
+
 # --- a user's dynamics function
 
 
@@ -108,6 +137,12 @@ def adds_in_place(states: th.Tensor, actions: th.Tensor) -> th.Tensor:
 
 def clamps_actions_in_place(states: th.Tensor, actions: th.Tensor) -> th.Tensor:
     return states + actions.clamp_(-0.1, 0.1)
+
+
+def test_dynamics_taking_the_wrong_number_of_arguments_are_refused_naming_dynamics_and_the_signature():
+    with pytest.raises(TypeError, match=r"dynamics must be a callable f\(states, actions\) -> next_states; "
+                                        r".*<lambda>\(states\) cannot be called so"):  # fmt: skip
+        make_dynamics(lambda states: states, STATES_3D, ACTIONS_1D)
 
 
 def test_dynamics_returning_a_numpy_array_are_refused_naming_the_function():

@@ -213,7 +213,7 @@ def test_delta_samples_without_noise_are_the_plan_where_its_increments_are_withi
 
 
 def test_delta_sampler_refuses_a_negative_std_or_a_zero_step_limit():
-    with pytest.raises(ValueError, match="noise_std >= 0 and max_delta > 0"):
+    with pytest.raises(ValueError, match="DeltaSampler needs noise_std >= 0; got -0.1"):
         DeltaSampler(np.full(1, -1.0), np.full(1, 1.0), -0.1, 0.2)
-    with pytest.raises(ValueError, match="noise_std >= 0 and max_delta > 0"):
+    with pytest.raises(ValueError, match="max_delta must be a finite number > 0, .* one per action dimension"):
         DeltaSampler(np.full(1, -1.0), np.full(1, 1.0), 0.5, 0.0)

@@ -10,6 +10,8 @@ import numpy as np
 import torch as th
 from torch import nn
 
+from sb3_mpail.checks import check_signature
+
 
 class RectangleObstacles(nn.Module):
     """
@@ -23,7 +25,8 @@ class RectangleObstacles(nn.Module):
     :param headings: each rectangle's heading (rad), ``(n,)``; ``None``: all 0 (axis-aligned)
     :param margin: how far around each rectangle the cost reaches (e.g. the vehicle's half width), ``> 0``
     :param weight: the cost of a state at the inflated rectangle's edge, ``> 0``
-    :param x_index: the state dimension of the position's x
+    :param x_index: the state dimension of the position's x (checked against the state's size when the planner is built,
+        and at every call)
     :param y_index: the state dimension of the position's y
     """
 
@@ -54,7 +57,23 @@ class RectangleObstacles(nn.Module):
         self.register_buffer("cos_sin", th.stack((th.cos(headings), th.sin(headings)), dim=1))
         self.margin, self.weight, self.x_index, self.y_index = float(margin), float(weight), x_index, y_index
 
+    def check_state_dim(self, state_dim: int) -> None:
+        """
+        Refuses position indices out of range for ``state_dim``-D states (negative ones count from the end).
+
+        :param state_dim: size of a state
+        :raises ValueError: ``x_index`` or ``y_index`` is out of range
+        """
+        indices = {"x_index": self.x_index, "y_index": self.y_index}
+        outside = [f"{name}={index}" for name, index in indices.items() if not -state_dim <= index < state_dim]
+        if outside:
+            raise ValueError(
+                f"RectangleObstacles' {' and '.join(outside)} {'is' if len(outside) == 1 else 'are'} out of range for the "
+                f"{state_dim}-D state (indices in [-{state_dim}, {state_dim})): give the state dimensions of the position."
+            )
+
     def forward(self, states: th.Tensor) -> th.Tensor:
+        self.check_state_dim(states.shape[-1])  # Python integers: no host sync
         offsets = states[..., [self.x_index, self.y_index]].unsqueeze(-2) - self.centres  # (..., n, 2)
         cos, sin = self.cos_sin[:, 0], self.cos_sin[:, 1]
         along = offsets[..., 0] * cos + offsets[..., 1] * sin
@@ -121,17 +140,27 @@ def parking_walls(margin: float = 1.0, weight: float = 100.0) -> RectangleObstac
 CONSTRAINT_COSTS: Dict[str, Callable[[], nn.Module]] = {"parking_walls": parking_walls}
 
 
-def make_constraint_cost(spec: Union[str, Callable[[th.Tensor], th.Tensor], None]) -> Optional[Callable]:
+def make_constraint_cost(
+    spec: Union[str, Callable[[th.Tensor], th.Tensor], None], state_dim: Optional[int] = None
+) -> Optional[Callable]:
     """
     The ``constraint_cost`` a setting names: a name of :data:`CONSTRAINT_COSTS`, a callable ``g(states)`` or ``None``.
 
     :param spec: the setting
+    :param state_dim: size of the states it will score, to check a cost that reads given state dimensions (its
+        ``check_state_dim``, e.g. :class:`RectangleObstacles`'); ``None``: unknown
+    :raises ValueError: an unknown name, something else than a callable, or state dimensions out of range
+    :raises TypeError: a callable that cannot be called with the states alone
     """
     if isinstance(spec, str):
         if spec not in CONSTRAINT_COSTS:
             raise ValueError(f"Unknown constraint_cost {spec!r}: a name of {sorted(CONSTRAINT_COSTS)}, a callable or None.")
-        return CONSTRAINT_COSTS[spec]()
+        spec = CONSTRAINT_COSTS[spec]()
     if spec is not None and not callable(spec):
         raise ValueError(f"constraint_cost must be a name of {sorted(CONSTRAINT_COSTS)}, a callable or None; got {spec!r}.")
+    if spec is not None:
+        check_signature(spec, "constraint_cost", "g(states) -> costs", 1)
+    if hasattr(spec, "check_state_dim") and state_dim is not None:
+        spec.check_state_dim(state_dim)
     return spec
 

@@ -197,7 +197,8 @@ class FeatureMap(nn.Module):
     def space(features: nn.Module, observation_space: spaces.Box, name: str = "discriminator_features") -> spaces.Box:
         """
         The unbounded ``Box`` of the features, sized by mapping two zero states; refuses state indices out of range
-        and maps that do not give ``(batch, n_features)``.
+        and maps that do not give ``(batch, n_features)`` of the states' dtype (float64 or boolean features would
+        meet the float32 networks).
 
         :param features: the feature map
         :param observation_space: the states it maps
@@ -207,13 +208,19 @@ class FeatureMap(nn.Module):
         state_dim = observation_space.shape[0]
         if isinstance(features, (FeatureSelection, AngleFeatures)):
             features.check_state_dim(state_dim, name)
+        states = th.zeros((2, *observation_space.shape))
         with th.no_grad():
-            probe = features(th.zeros((2, *observation_space.shape)))
+            probe = features(states)
         if not isinstance(probe, th.Tensor) or probe.ndim != 2 or probe.shape[0] != 2:
             shape = tuple(probe.shape) if isinstance(probe, th.Tensor) else type(probe).__name__
             raise ValueError(
                 f"{name} must map (batch, {state_dim}) states to a (batch, n_features) tensor; "
                 f"for a batch of 2 it gave {shape}."
+            )
+        if probe.dtype != states.dtype:
+            raise ValueError(
+                f"{name} must return features of the states' dtype ({states.dtype} here); for {str(states.dtype)[6:]} "
+                f"states it gave {probe.dtype}. Return real numbers in the states' dtype (e.g. features.to(states.dtype))."
             )
         return spaces.Box(-np.inf, np.inf, (probe.shape[1],), np.float32)
 

@@ -23,7 +23,16 @@ from gymnasium import spaces
 from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
 
-from sb3_mpail.checks import HIDDEN_SIZES, POSITIVE_INTEGER, check_arguments
+from sb3_mpail.checks import (
+    DECAY_FACTOR,
+    FINITE_NUMBER,
+    HIDDEN_SIZES,
+    NON_NEGATIVE_NUMBER,
+    POSITIVE_INTEGER,
+    POSITIVE_NUMBER,
+    check_arguments,
+    check_signature,
+)
 
 DynamicsFunction = Callable[[th.Tensor, th.Tensor], th.Tensor]
 
@@ -134,7 +143,9 @@ class PendulumDynamics(nn.Module):
     """
     The exact dynamics of gymnasium's ``Pendulum-v1`` on its observation ``[cos(theta), sin(theta), theta_dot]``.
 
-    :param gravity: ``g`` of the environment (gymnasium's default is 10)
+    :param gravity: ``g`` of the environment (gymnasium's default is 10; chosen automatically for ``Pendulum-v1``, the
+        model takes the env's own ``g``)
+    :raises ValueError: ``gravity`` is not a finite number
     """
 
     state_dim = 3
@@ -147,6 +158,7 @@ class PendulumDynamics(nn.Module):
 
     def __init__(self, gravity: float = 10.0):
         super().__init__()
+        check_arguments(gravity=(gravity, FINITE_NUMBER))
         self.gravity = gravity
 
     def forward(self, states: th.Tensor, actions: th.Tensor) -> th.Tensor:
@@ -491,14 +503,15 @@ class LearnedDynamics(nn.Module):
     :param state_dim: size of a state
     :param action_dim: size of an action
     :param hidden_sizes: hidden layer widths (paper: 3 x 64 for cartpole, 3 x 256 for Ant)
-    :param learning_rate: initial Adam learning rate
-    :param lr_decay: multiplicative decay of the learning rate
+    :param learning_rate: initial Adam learning rate, ``> 0``
+    :param lr_decay: multiplicative decay of the learning rate, in ``(0, 1]``
     :param lr_decay_every: number of epochs between decays
     :param min_learning_rate: learning-rate floor
     :param buffer_size: replay buffer capacity in transitions
     :param batch_size: minibatch size
     :param n_epochs: passes over the buffer per call of :meth:`fit`
     :param seed: seed of the buffer's replacement and minibatch order
+    :raises ValueError: a setting is out of its range (each is named)
     """
 
     def __init__(
@@ -522,6 +535,9 @@ class LearnedDynamics(nn.Module):
             batch_size=(batch_size, POSITIVE_INTEGER),
             n_epochs=(n_epochs, POSITIVE_INTEGER),
             lr_decay_every=(lr_decay_every, POSITIVE_INTEGER),
+            learning_rate=(learning_rate, POSITIVE_NUMBER),
+            lr_decay=(lr_decay, DECAY_FACTOR),
+            min_learning_rate=(min_learning_rate, NON_NEGATIVE_NUMBER),
         )
         self.state_dim = state_dim
         self.action_dim = action_dim
@@ -640,6 +656,18 @@ DEFAULT_DYNAMICS: Dict[str, str] = {
     "sb3_mpail/Parking-v0": "parking",
     "sb3_mpail/PointMaze-v0": "point_mass",
 }
+#: per model chosen automatically (:data:`DEFAULT_DYNAMICS`), its keyword arguments read from the env's attributes
+#: (keyword: attribute), so that the model plans with the env's own physics (``Pendulum-v1``'s ``g``)
+ENV_DYNAMICS_KWARGS: Dict[str, Dict[str, str]] = {"pendulum": {"gravity": "g"}}
+
+
+def how_to_give_dynamics() -> str:
+    """How to give a dynamics model, as the errors for an environment without one say (naming the models known now)."""
+    return (
+        f"pass policy_kwargs=dict(dynamics=...) with one of {sorted(DYNAMICS_MODELS)}, an nn.Module or a callable "
+        "f(states, actions) -> next_states."
+    )
+
 
 DynamicsSpec = Union[str, nn.Module, DynamicsFunction]
 
@@ -660,14 +688,13 @@ def make_dynamics(
     :param action_space: the environment's action space
     :param dynamics_kwargs: keyword arguments for a named model
     :raises ValueError: no, an unknown or an unfitting model, or one that modifies its inputs in place
-    :raises TypeError: ``dynamics`` is of no kind above, or the model returns something other than a tensor
+    :raises TypeError: ``dynamics`` is of no kind above, cannot be called with ``(states, actions)``, or the model
+        returns something other than a tensor
     """
     dynamics_kwargs = dynamics_kwargs or {}
     if dynamics is None:
         raise ValueError(
-            "MPAIL plans through a dynamics model and none was given for this environment: pass "
-            "policy_kwargs=dict(dynamics=...) with one of "
-            f"{sorted(DYNAMICS_MODELS)}, an nn.Module or a callable f(states, actions) -> next_states."
+            f"MPAIL plans through a dynamics model and none was given for this environment: {how_to_give_dynamics()}"
         )
     if isinstance(dynamics, str):
         if dynamics not in DYNAMICS_MODELS:
@@ -675,10 +702,9 @@ def make_dynamics(
         if dynamics == "learned":
             dynamics_kwargs = {"state_dim": observation_space.shape[0], "action_dim": action_space.shape[0], **dynamics_kwargs}
         model = DYNAMICS_MODELS[dynamics](**dynamics_kwargs)
-    elif isinstance(dynamics, nn.Module):
-        model = dynamics
     elif callable(dynamics):
-        model = CallableDynamics(dynamics)
+        check_signature(dynamics, "dynamics", "f(states, actions) -> next_states", 2)
+        model = dynamics if isinstance(dynamics, nn.Module) else CallableDynamics(dynamics)
     else:
         raise TypeError(f"dynamics must be a model name, an nn.Module or a callable, got {type(dynamics).__name__}.")
     name = model.name if isinstance(model, CallableDynamics) else f"The dynamics model {type(model).__name__}"

@@ -5,6 +5,7 @@ One planning step, for every env at once:
 
 1. **warm start**: shift the previous plan one step forward, the new last step at the neutral action;
 2. repeat ``J`` times:
+
    a. **sample** ``N`` action sequences around the plan (and add the policy prior's ``K`` proposals, when there is one),
    b. **roll out** each through the dynamics model for ``H`` steps,
    c. **cost** each trajectory: ``C = sum_t eta^t c(s_t, s_{t+1}) - eta^H V(s_H)``,
@@ -155,39 +156,69 @@ class TrajectoryCost:
             if self.fused_step_cost is not None:
                 costs = self.fused_step_cost(states, self.markups, self.workspace)
             else:
-                step_costs = _checked_output(self.step_cost(states[:-1], states[1:]), states.shape[:-1], "step_cost", 1)
+                step_costs = _checked_output(self.step_cost(states[:-1], states[1:]), states, "step_cost", 1)
                 costs = th.einsum("t,ten->en", self.markups, step_costs)
         if self.terminal_value is not None:
             final_states = states[-1]
             if self.fused_value is not None:
                 values = self.fused_value(final_states, self.workspace)
             else:
-                values = _checked_output(self.terminal_value(final_states), final_states.shape[:-1], "terminal_value")
+                values = _checked_output(self.terminal_value(final_states), final_states, "terminal_value")
             costs = values * -self.terminal_markup if costs is None else costs.sub_(values, alpha=self.terminal_markup)
         assert costs is not None
         if self.constraint_cost is not None:
-            penalties = _checked_output(self.constraint_cost(states[1:]), states.shape[:-1], "constraint_cost", 1)
+            penalties = _checked_output(self.constraint_cost(states[1:]), states, "constraint_cost", 1, flags=True)
             costs.add_(penalties.sum(0))
         return costs
 
 
-def _checked_output(output: th.Tensor, leading_shape: th.Size, name: str, skipped_steps: int = 0) -> th.Tensor:
+def _checked_output(output: th.Tensor, states: th.Tensor, name: str, skipped_steps: int = 0, flags: bool = False) -> th.Tensor:
     """
-    A user's cost or value output, refused unless it is one number per state (a shape check: no host sync).
+    A user's cost or value output, refused unless it is one real number per state, and cast to the states' dtype
+    (float64 costs of float32 states, as a float64 dynamics model's next states are); a shape and dtype check: no host
+    sync.
 
     :param output: what ``name`` returned
-    :param leading_shape: the shape of the states it scored, less their last (state) dimension
+    :param states: the states it scored (their shape less the last, state, dimension, and their dtype are used)
     :param name: the setting it came from, as the error names it
-    :param skipped_steps: time steps fewer than ``leading_shape`` has (transitions are one fewer than states)
+    :param skipped_steps: time steps fewer than ``states`` has (transitions are one fewer than states)
+    :param flags: booleans are taken, as 0 and 1 (a constraint's "inside a wall"); a cost or value must be numbers
     """
-    expected = (leading_shape[0] - skipped_steps, *leading_shape[1:])
+    expected = (states.shape[0] - skipped_steps, *states.shape[1:-1])
     if not isinstance(output, th.Tensor) or tuple(output.shape) != expected:
         got = f"shape {tuple(output.shape)}" if isinstance(output, th.Tensor) else type(output).__name__
         raise ValueError(
             f"{name} must return a torch tensor of one number per state, shape {expected} here (the leading shape of "
             f"the states it was given); got {got}."
         )
-    return output
+    if output.is_complex() or (output.dtype == th.bool and not flags):
+        raise ValueError(
+            f"{name} must return real numbers (a floating-point tensor, cast to the states' {states.dtype}); got dtype "
+            f"{output.dtype}. Turn a flag into a number first, e.g. flag.to(states.dtype) * weight."
+        )
+    return output.to(states.dtype)  # itself when it has that dtype
+
+
+def _checked_samples(samples: th.Tensor, plan: th.Tensor, n_samples: int) -> th.Tensor:
+    """
+    The sampler's action sequences, refused unless they are a tensor of the time-major shape the planner reads (a shape
+    check: no host sync).
+
+    :param samples: what the sampler returned
+    :param plan: the plan it sampled around, ``(n_envs, horizon, action_dim)``
+    :param n_samples: ``N``, the sequences asked for per env
+    """
+    n_envs, horizon, action_dim = plan.shape
+    expected = (horizon, n_envs, n_samples, action_dim)
+    if not isinstance(samples, th.Tensor) or tuple(samples.shape) != expected:
+        got = f"shape {tuple(samples.shape)}" if isinstance(samples, th.Tensor) else type(samples).__name__
+        raise ValueError(f"sampler must return (H, n_envs, N, A) = {expected} action sequences; got {got}.")
+    return samples
+
+
+def _envs(indices: Sequence[int]) -> str:
+    """Env indices as a message names them: ``env 1`` or ``envs [0, 1]``."""
+    return f"env {indices[0]}" if len(indices) == 1 else f"envs {list(indices)}"
 
 
 def _planning_view(network: Optional[Callable], state_dim: int) -> Optional[Callable]:
@@ -316,11 +347,62 @@ class MPPIPlanner(nn.Module):
                 update = self._compiled()
             proposals = self._proposals(states, plan.shape[1], generator)
             for _ in range(self.n_iterations):
-                actions = self.sampler(plan, self.n_samples, generator)
+                actions = _checked_samples(self.sampler(plan, self.n_samples, generator), plan, self.n_samples)
                 if proposals is not None:
                     actions = th.cat((actions, proposals), dim=2)
                 plan, weights, costs = update(states, actions, temperature, trajectory_cost)
             return LastIteration(plan, actions, weights, costs.clone())  # the costs are scratch of the fused views
+
+    def non_finite_cause(self, states: th.Tensor, previous_plan: th.Tensor) -> Optional[str]:
+        """
+        Why a planning step from finite ``states`` and ``previous_plan`` made a non-finite plan, where the cause is the
+        constraint cost or a sampled set with no finite cost: the step's first iteration is re-run step by step (fresh
+        noise, no prior proposals) and its constraint values and trajectory costs read. Only for a plan already found
+        non-finite: it reads values back to the host.
+
+        A constraint that is infinite for every sampled sequence of an env leaves it no feasible sample: the MPPI
+        weights ``softmax(-C / lambda)`` of costs that are all infinite are undefined (NaN), so the plan is refused
+        rather than made up. Where some sequences are feasible, the infinite ones simply get weight 0.
+
+        :param states: the states planned from, ``(n_envs, state_dim)``
+        :param previous_plan: the plans planned from (before the warm start's shift), ``(n_envs, horizon, action_dim)``
+        :return: the cause, or ``None`` when neither is it (or the re-run does not reproduce it)
+        """
+        with th.no_grad():
+            generator = th.Generator(device=states.device).manual_seed(0)
+            plan = shift_plan(previous_plan, self.neutral_action)
+            actions = _checked_samples(self.sampler(plan, self.n_samples, generator), plan, self.n_samples)
+            visited = rollout_step_by_step(self.dynamics, states, actions)
+            trajectory_cost = TrajectoryCost(
+                self.step_cost if self.use_step_cost else None,
+                self.terminal_value if self.use_terminal_value else None,
+                self.markup,
+                plan.shape[1],
+                states,
+                self._workspace,
+                fused=False,
+                constraint_cost=self.constraint_cost,
+            )
+            costs = trajectory_cost(visited)  # (n_envs, N)
+            penalties = None
+            if self.constraint_cost is not None:  # per sequence, (n_envs, N): NaN or +inf if any state's is
+                penalties = _checked_output(self.constraint_cost(visited[1:]), visited, "constraint_cost", 1, True).sum(0)
+        causes = []
+        if penalties is not None:
+            nan_envs = th.isnan(penalties).any(1).nonzero().flatten().tolist()
+            if nan_envs:
+                causes.append(f"constraint_cost returned NaN for {_envs(nan_envs)}")
+        infeasible = th.isposinf(costs).all(1).nonzero().flatten().tolist()
+        if infeasible:
+            constrained = penalties is not None and bool(th.isposinf(penalties[infeasible]).all())
+            causes.append(
+                f"every sampled sequence of {_envs(infeasible)} has an infinite cost (no feasible sample)"
+                + (": constraint_cost is infinite on each" if constrained else "")
+                + ", and MPPI's weights of costs that are all infinite are undefined. Give a large finite cost instead "
+                "of an infinite one (as RectangleObstacles' weight), or start where some sequence within the horizon "
+                "keeps to the constraint"
+            )
+        return "; ".join(causes) + "." if causes else None
 
     def _proposals(self, states: th.Tensor, horizon: int, generator: th.Generator) -> Optional[th.Tensor]:
         """The prior's sequences of this planning step, ``(horizon, n_envs, K, action_dim)``, or ``None`` without one."""

@@ -7,6 +7,7 @@ import numpy as np
 import torch as th
 from torch import nn
 
+from sb3_mpail.checks import POSITIVE_NUMBER, check_arguments, per_action_dimension
 from sb3_mpail.mppi.native import standard_normal
 
 
@@ -113,7 +114,10 @@ class DeltaSampler(ActionSampler):
     :param action_low: lower action bounds, shape ``(action_dim,)``
     :param action_high: upper action bounds, shape ``(action_dim,)``
     :param noise_std: std of the increments' noise relative to the action half-range (scalar or per dimension)
-    :param max_delta: largest change between consecutive actions relative to the half-range (scalar or per dimension)
+    :param max_delta: largest change between consecutive actions relative to the half-range, ``> 0`` (scalar or per
+        dimension)
+    :raises ValueError: ``noise_std`` is negative, or ``max_delta`` is not a finite number ``> 0`` or one per action
+        dimension
     """
 
     def __init__(
@@ -124,10 +128,11 @@ class DeltaSampler(ActionSampler):
         max_delta: Union[float, np.ndarray] = 0.2,
     ):
         super().__init__(action_low, action_high)
+        check_arguments(max_delta=(max_delta, per_action_dimension(POSITIVE_NUMBER, len(self.action_low))))
         std = th.as_tensor(np.asarray(noise_std, dtype=np.float32))
         delta = th.as_tensor(np.asarray(max_delta, dtype=np.float32))
-        if bool((std < 0).any()) or bool((delta <= 0).any()):
-            raise ValueError(f"DeltaSampler needs noise_std >= 0 and max_delta > 0; got {noise_std} and {max_delta}.")
+        if bool((std < 0).any()):
+            raise ValueError(f"DeltaSampler needs noise_std >= 0; got {noise_std}.")
         self.register_buffer("noise_std", std * self.half_range)
         self.register_buffer("max_delta", delta * self.half_range)
 
