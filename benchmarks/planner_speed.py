@@ -39,6 +39,7 @@ IMPLEMENTATIONS = {
     "blas": "sb3-mpail, torch path, BLAS hidden layers (oneDNN off)",
     "compiled": "sb3-mpail + torch.compile",
     "cuda-graphs": "sb3-mpail + torch.compile(reduce-overhead) (CUDA graphs)",
+    "predict": "sb3-mpail through predict(deterministic=True): checks, lock, fresh noise seed, plan carried",
     "reference": "plain reference implementation",
     "pytorch_mppi": "pytorch_mppi 0.9.1, loop over envs",
 }
@@ -81,6 +82,15 @@ def planning_step_sb3_mpail(n_envs: int, device: str, implementation: str) -> Ca
     states = random_states(n_envs, device)
     generator = th.Generator(device=device).manual_seed(0)
     plan = planner.initial_plan(n_envs)
+    if implementation == "predict":  # the deployed path, from numpy to numpy, as a robot or a server calls it
+        observations, plans = states.cpu().numpy(), plan.cpu().numpy()
+        starts = np.zeros(n_envs, dtype=bool)
+
+        def predict_step() -> None:
+            nonlocal plans
+            _, plans = policy.predict(observations, state=plans, episode_start=starts, deterministic=True)
+
+        return predict_step
 
     def step() -> None:
         nonlocal plan
@@ -208,6 +218,7 @@ def cases(args: argparse.Namespace) -> List[tuple]:
     planned = []
     for device in args.devices:
         implementations = ["sb3-mpail", "reference"] + (["pytorch_mppi"] if not args.no_pytorch_mppi else [])
+        implementations += ["predict"]
         implementations += ["torch"] if device == "cpu" else []
         implementations += ["blas"] if device == "cpu" and th.backends.mkldnn.is_available() else []
         implementations += ["compiled"] if args.compile else []

@@ -121,3 +121,16 @@ def test_actions_and_plans_stay_within_the_bounds_whatever_the_sampler(demos, de
     for observations in observation_batches(n_calls=4):
         actions, plans = model.predict(observations, state=plans, deterministic=deterministic)
         assert np.abs(actions).max() <= 2.0 and np.abs(plans).max() <= 2.0
+
+
+def test_predict_plans_in_evaluation_mode_even_after_a_submodule_was_put_in_training_mode(model):
+    """Setting the mode is skipped where every module already has it, so a submodule switched alone must be found."""
+    observations = observation_batches(n_calls=1)[0]
+    expected, _ = model.predict(observations, deterministic=True)
+    discriminator = model.policy.discriminator
+    discriminator.train()  # spectral norm's power iteration would move on every call in training mode
+    assert discriminator.training
+    for _ in range(3):
+        actions, _ = model.predict(observations, deterministic=True)
+        np.testing.assert_array_equal(actions, expected)
+    assert not any(module.training for module in model.policy.modules())
