@@ -25,7 +25,9 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
 
+import numpy as np
 import torch as th
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 
 from benchmarks.report import machine_description, machines_of, write_section
@@ -78,7 +80,29 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         question="the discriminator also sees the last 50,000 agent transitions",
         changes=dict(discriminator_replay_size=50_000),
     ),
+    "gradient-penalty": dict(
+        question="a gradient penalty on the discriminator (weight 10, between expert and agent transitions) instead of "
+        "spectral norm, as MPAIL2's critic bounds its slope",
+        changes=dict(discriminator_gradient_penalty=10.0, policy_kwargs=dict(use_spectral_norm=False)),
+    ),
 }
+
+
+class TrainingCurve(BaseCallback):
+    """At every rollout's end: env steps, and the mean length and return of the last 100 training episodes."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.points: List[List[float]] = []
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        episodes = self.model.ep_info_buffer
+        if episodes:
+            lengths, returns = [episode["l"] for episode in episodes], [episode["r"] for episode in episodes]
+            self.points.append([self.num_timesteps, round(float(np.mean(lengths)), 1), round(float(np.mean(returns)), 1)])
 
 
 def variant_settings(env_id: str, name: str) -> Dict[str, Any]:
@@ -111,8 +135,9 @@ def run_variant(
     n_envs, budget = settings.pop("n_envs"), int(settings.pop("n_timesteps"))
     budget = budget if timesteps is None else timesteps
     model = MPAIL("MlpMPPI", make_vec_env(env_id, n_envs=n_envs, seed=seed), seed=seed, device="cpu", **settings)
+    curve = TrainingCurve()
     started = time.perf_counter()
-    model.learn(budget)
+    model.learn(budget, callback=curve)
     train_seconds = time.perf_counter() - started
     figures = evaluate_locomotion(model, env_id, n_eval_episodes, EVAL_SEED + seed, n_envs=n_eval_episodes)
     reference = shipped_demo_info(settings["demos"].rsplit("_", 1)[0])
@@ -122,6 +147,7 @@ def run_variant(
         score=normalised_score(figures["return"], reference), speed_ratio=figures["forward_speed"] / reference[
             "expert_forward_speed"], **figures,
     )  # fmt: skip
+    result["training_curve"] = curve.points  # env steps, mean length and return of the last 100 training episodes
     result["settings"] = settings  # what the variant's name meant when it ran: the zoo entry may change later
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(result, default=repr))

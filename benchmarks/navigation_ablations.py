@@ -125,6 +125,31 @@ VARIANTS: Dict[str, Variant] = {
         "standardised with the demos' statistics of s and s'",
         lambda: dict(value_features=dict(angles=[5]), standardise_inputs=True),
     ),
+    "value-layer-norm": Variant(
+        "the value's hidden layers layer-normalised, which bounds it (it levels off far from the data)",
+        lambda: dict(value_layer_norm=True),
+    ),
+    "concave-value": Variant(
+        "a value concave in the state (a negated input-convex network): one peak region, falling away in every direction",
+        lambda: dict(concave_value=True),
+    ),
+    "concave-value-on-angles": Variant(
+        "the concave value on the heading as cosine and sine",
+        lambda: dict(concave_value=True, value_features=dict(angles=[5])),
+    ),
+    "discriminator-ensemble": Variant(
+        "5 discriminators, the cost their mean logit less their standard deviation (disagreement as an OOD penalty)",
+        lambda: dict(discriminator_ensemble_size=5, discriminator_disagreement=1.0),
+    ),
+    "gradient-penalty": Variant(
+        "a gradient penalty on the discriminator (weight 10, WGAN-GP's, between expert and agent) beside spectral norm",
+        algorithm_kwargs=dict(discriminator_gradient_penalty=10.0),
+    ),
+    "gradient-penalty-instead-of-spectral-norm": Variant(
+        "the gradient penalty (weight 10) instead of spectral norm",
+        lambda: dict(use_spectral_norm=False),
+        algorithm_kwargs=dict(discriminator_gradient_penalty=10.0),
+    ),
     "discriminator-replay": Variant(
         "the discriminator also sees the last 10 rollouts (8000 agent transitions)",
         algorithm_kwargs=dict(discriminator_replay_size=8000),

@@ -48,6 +48,7 @@ from sb3_mpail.checks import (
 )
 from sb3_mpail.demos import DemoSource, ExpertTransitions, load_demos
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, ENV_DYNAMICS_KWARGS, LearnedDynamics, how_to_give_dynamics
+from sb3_mpail.mppi.ensemble import member_logits
 from sb3_mpail.policies import NON_FINITE_OBSERVATION, MlpMPPI, MPPIPolicy
 from sb3_mpail.prior import PriorReplay
 
@@ -103,6 +104,9 @@ class MPAIL(BaseAlgorithm):
     :param discriminator_replay_size: agent transitions of earlier rollouts kept for the discriminator (imitation's FIFO
         ``Buffer``); each discriminator minibatch adds as many of them as it has of the current rollout, so behaviour
         the agent has left behind stays agent-like. ``0``: the current rollout only (the paper's)
+    :param discriminator_gradient_penalty: weight of a gradient penalty on the discriminator, ``(||grad d|| - 1)^2`` at
+        random points between expert and agent transitions (WGAN-GP's, as MPAIL2's critic), beside or instead of
+        spectral norm (``use_spectral_norm``); ``0``: none, the paper's
     :param value_learning_rate: Adam learning rate of the value
     :param value_betas: Adam betas of the value
     :param value_clip: clip range of the value loss around the values at collection time
@@ -151,6 +155,7 @@ class MPAIL(BaseAlgorithm):
         discriminator_l2: float = 0.0,
         discriminator_update_interval: int = 3,
         discriminator_replay_size: int = 0,
+        discriminator_gradient_penalty: float = 0.0,
         value_learning_rate: float = 1e-3,
         value_betas: Tuple[float, float] = (0.9, 0.999),
         value_clip: float = 0.2,
@@ -196,6 +201,7 @@ class MPAIL(BaseAlgorithm):
         self.discriminator_update_interval = discriminator_update_interval
         self.discriminator_replay_size = discriminator_replay_size
         self.discriminator_replay: Buffer | None = None
+        self.discriminator_gradient_penalty = discriminator_gradient_penalty
         self.value_learning_rate = value_learning_rate
         self.value_betas = value_betas
         self.value_clip = value_clip
@@ -239,6 +245,7 @@ class MPAIL(BaseAlgorithm):
             discriminator_l2=(self.discriminator_l2, NON_NEGATIVE_NUMBER),
             discriminator_update_interval=(self.discriminator_update_interval, POSITIVE_INTEGER),
             discriminator_replay_size=(self.discriminator_replay_size, NON_NEGATIVE_INTEGER),
+            discriminator_gradient_penalty=(self.discriminator_gradient_penalty, NON_NEGATIVE_NUMBER),
             value_learning_rate=(self.value_learning_rate, POSITIVE_NUMBER),
             value_betas=(self.value_betas, BETAS),
             value_clip=(self.value_clip, POSITIVE_NUMBER),
@@ -684,13 +691,18 @@ class MPAIL(BaseAlgorithm):
                     batch_features = th.cat((batch_features, self._tensor(replayed["features"])))
                     batch_next_features = th.cat((batch_next_features, self._tensor(replayed["next_features"])))
                 expert_batch = th.randint(len(expert_observations), (len(batch_features),), device=self.device)
-                agent_logits = discriminator(batch_features, None, batch_next_features, None)
-                expert_logits = discriminator(
-                    expert_observations[expert_batch], None, expert_next_observations[expert_batch], None
+                # (members, batch): an ensemble's members each learn from the whole batch
+                agent_logits = member_logits(discriminator, batch_features, batch_next_features)
+                expert_logits = member_logits(
+                    discriminator, expert_observations[expert_batch], expert_next_observations[expert_batch]
                 )
-                logits = th.cat((expert_logits, agent_logits))
-                labels = th.cat((th.ones_like(expert_logits), th.zeros_like(agent_logits)))
+                logits = th.cat((expert_logits, agent_logits), dim=1)
+                labels = th.cat((th.ones_like(expert_logits), th.zeros_like(agent_logits)), dim=1)
                 loss = F.binary_cross_entropy_with_logits(logits, labels)
+                if self.discriminator_gradient_penalty > 0:
+                    expert_pair = (expert_observations[expert_batch], expert_next_observations[expert_batch])
+                    penalty = self._gradient_penalty(expert_pair, (batch_features, batch_next_features))
+                    loss = loss + self.discriminator_gradient_penalty * penalty
                 self.discriminator_optimizer.zero_grad()
                 loss.backward()
                 self.discriminator_optimizer.step()
@@ -703,6 +715,19 @@ class MPAIL(BaseAlgorithm):
         self.logger.record("train/discriminator_accuracy", (np.mean(expert_accuracies) + np.mean(agent_accuracies)) / 2)
         self.logger.record("train/expert_accuracy", np.mean(expert_accuracies))
         self.logger.record("train/agent_accuracy", np.mean(agent_accuracies))
+
+    def _gradient_penalty(self, expert: Tuple[th.Tensor, th.Tensor], agent: Tuple[th.Tensor, th.Tensor]) -> th.Tensor:
+        """
+        ``(||grad d(x)|| - 1)^2`` (of each member of an ensemble) averaged over points ``x`` drawn uniformly between
+        paired expert and agent transitions ``(features, next_features)``, the gradient taken over both states.
+        """
+        mix = th.rand(len(agent[0]), 1, device=self.device)
+        points = [th.lerp(agent_part, expert_part, mix).requires_grad_(True) for expert_part, agent_part in zip(expert, agent)]
+        penalties = []
+        for logits in member_logits(self.policy.discriminator, *points):  # each member's own slope
+            gradients = th.autograd.grad(logits.sum(), points, create_graph=True, retain_graph=True)
+            penalties.append((th.cat(gradients, dim=1).norm(dim=1) - 1).square().mean())
+        return th.stack(penalties).mean()
 
     def _replay_buffer(self, feature_shape: Tuple[int, ...]) -> Buffer | None:
         """The discriminator's replay of earlier agent rollouts (created on first use), or ``None`` when it is off."""

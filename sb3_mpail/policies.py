@@ -14,6 +14,7 @@ from sb3_mpail.checks import (
     NON_NEGATIVE_INTEGER,
     NON_NEGATIVE_NUMBER,
     OPTIONAL_DICT,
+    POSITIVE_INTEGER,
     POSITIVE_NUMBER,
     check_arguments,
     check_finite,
@@ -32,6 +33,7 @@ from sb3_mpail.mppi.costs import (
     make_value_network,
 )
 from sb3_mpail.mppi.dynamics import DynamicsSpec, LearnedDynamics, make_dynamics
+from sb3_mpail.mppi.ensemble import DiscriminatorEnsemble
 from sb3_mpail.mppi.planner import MPPIPlanner, weighted_action_std
 from sb3_mpail.mppi.sampling import make_sampler
 from sb3_mpail.prior import PolicyPrior, PriorValue
@@ -70,7 +72,16 @@ class MPPIPolicy(BasePolicy):
     :param use_terminal_value: bootstrap with the value (``False``: cost-only ablation)
     :param discriminator_hidden_sizes: hidden widths of the discriminator
     :param value_hidden_sizes: hidden widths of the value network
+    :param value_layer_norm: layer-normalise the value's hidden layers, which bounds it: far from the data it levels off
+        instead of extrapolating linearly (:func:`~sb3_mpail.mppi.costs.make_value_network`)
+    :param concave_value: a value concave in its inputs (:class:`~sb3_mpail.mppi.costs.ConcaveValue`): it peaks on one
+        region it learns and falls away from it in every direction, never rising far from the data
     :param use_spectral_norm: spectral normalisation on the discriminator's layers
+    :param discriminator_ensemble_size: ``K`` discriminators instead of one, the reward and step cost their mean logit
+        less ``discriminator_disagreement`` times their standard deviation
+        (:class:`~sb3_mpail.mppi.ensemble.DiscriminatorEnsemble`): transitions far from the data, where the members
+        extrapolate differently, look less expert-like. ``1``: one discriminator (the paper's)
+    :param discriminator_disagreement: weight of the ensemble's standard deviation, ``>= 0``
     :param discriminator_features: what the discriminator sees of a state: a fixed map ``features(states) ->
         (batch, n_features)`` on ``(batch, state_dim)`` tensors (an ``nn.Module``, a picklable function, a list of
         the state indices kept, or ``{"angles": [indices]}`` for :class:`~sb3_mpail.mppi.costs.AngleFeatures`),
@@ -129,7 +140,11 @@ class MPPIPolicy(BasePolicy):
         use_terminal_value: bool = True,
         discriminator_hidden_sizes: Sequence[int] = (32, 32),
         value_hidden_sizes: Sequence[int] = (32, 32),
+        value_layer_norm: bool = False,
+        concave_value: bool = False,
         use_spectral_norm: bool = True,
+        discriminator_ensemble_size: int = 1,
+        discriminator_disagreement: float = 1.0,
         discriminator_features: FeatureSpec | None = None,
         value_features: FeatureSpec | None = None,
         sampler: Union[str, nn.Module] = "gaussian",
@@ -159,10 +174,14 @@ class MPPIPolicy(BasePolicy):
             use_step_cost=(use_step_cost, BOOLEAN),
             use_terminal_value=(use_terminal_value, BOOLEAN),
             use_spectral_norm=(use_spectral_norm, BOOLEAN),
+            discriminator_ensemble_size=(discriminator_ensemble_size, POSITIVE_INTEGER),
+            discriminator_disagreement=(discriminator_disagreement, NON_NEGATIVE_NUMBER),
             dynamics_kwargs=(dynamics_kwargs, OPTIONAL_DICT),
             noise_std=(noise_std, per_action_dimension(NON_NEGATIVE_NUMBER, action_space.shape[0])),
             discriminator_hidden_sizes=(discriminator_hidden_sizes, HIDDEN_SIZES),
             value_hidden_sizes=(value_hidden_sizes, HIDDEN_SIZES),
+            value_layer_norm=(value_layer_norm, BOOLEAN),
+            concave_value=(concave_value, BOOLEAN),
             sampler_kwargs=(sampler_kwargs, OPTIONAL_DICT),
             policy_prior=(policy_prior, BOOLEAN),
             prior_kwargs=(prior_kwargs, OPTIONAL_DICT),
@@ -186,7 +205,11 @@ class MPPIPolicy(BasePolicy):
             use_terminal_value=use_terminal_value,
             discriminator_hidden_sizes=discriminator_hidden_sizes,
             value_hidden_sizes=value_hidden_sizes,
+            value_layer_norm=value_layer_norm,
+            concave_value=concave_value,
             use_spectral_norm=use_spectral_norm,
+            discriminator_ensemble_size=discriminator_ensemble_size,
+            discriminator_disagreement=discriminator_disagreement,
             discriminator_features=discriminator_features,
             value_features=value_features,
             sampler=sampler,
@@ -209,10 +232,14 @@ class MPPIPolicy(BasePolicy):
         if standardise_inputs:
             n_features = self.feature_space.shape[0]
             self.discriminator_features = StandardisedFeatures(self.discriminator_features, n_features, min_input_scale)
-        self.discriminator = make_transition_discriminator(
-            self.feature_space, action_space, discriminator_hidden_sizes, use_spectral_norm
-        )
-        self.value_net = make_value_network(observation_space.shape[0], value_hidden_sizes)
+        discriminators = [
+            make_transition_discriminator(self.feature_space, action_space, discriminator_hidden_sizes, use_spectral_norm)
+            for _ in range(discriminator_ensemble_size)
+        ]
+        self.discriminator = discriminators[0]
+        if discriminator_ensemble_size > 1:
+            self.discriminator = DiscriminatorEnsemble(discriminators, discriminator_disagreement)
+        self.value_net = make_value_network(observation_space.shape[0], value_hidden_sizes, value_layer_norm, concave_value)
         value_map, value_inputs = None, observation_space.shape[0]
         if value_features is not None:
             value_map = FeatureMap.wrap(value_features, "value_features").requires_grad_(False)  # fixed: not optimised
@@ -220,7 +247,9 @@ class MPPIPolicy(BasePolicy):
         if standardise_inputs:
             value_map = StandardisedFeatures(value_map, value_inputs, min_input_scale)
         if value_map is not None:
-            self.value_net = MappedNetwork(value_map, make_value_network(value_inputs, value_hidden_sizes))
+            self.value_net = MappedNetwork(
+                value_map, make_value_network(value_inputs, value_hidden_sizes, value_layer_norm, concave_value)
+            )
         self.dynamics = make_dynamics(dynamics, observation_space, action_space, dynamics_kwargs)
         self.prior = PolicyPrior(observation_space, action_space, **(prior_kwargs or {})) if policy_prior else None
         if terminal_value is None:

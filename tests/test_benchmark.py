@@ -171,3 +171,13 @@ def test_an_ablation_report_names_the_machine_its_runs_ran_on(tmp_path):
         (grid / f"defaults_seed{seed}.json").write_text(json.dumps(run))
     text = locomotion_ablations.report(tmp_path)
     assert "2 evaluation episodes per run, on machine A; machine B." in text
+
+
+def test_a_locomotion_ablation_run_records_its_training_curve(tmp_path):
+    from benchmarks import locomotion_ablations
+
+    path = locomotion_ablations.run_variant("Hopper-v4", "defaults", 0, 1000, 1, tmp_path, "c")
+    curve = json.loads(path.read_text())["training_curve"]
+    assert [point[0] for point in curve] == [1000]  # one rollout of 4 envs x 250 steps
+    steps, length, episode_return = curve[0]
+    assert 0 < length <= 250 and np.isfinite(episode_return)

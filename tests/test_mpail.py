@@ -1,5 +1,7 @@
 """MPAIL honours Stable-Baselines3's algorithm contract and refuses bad input with a clear error."""
 
+import json
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -10,6 +12,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
 from sb3_mpail import MPAIL
+from sb3_mpail.mppi import ConcaveValue, DiscriminatorEnsemble, make_value_network
 
 TINY_PLANNER = dict(n_samples=16, horizon=3, n_iterations=2)
 
@@ -127,7 +130,8 @@ def test_demos_are_not_written_into_the_saved_file(demos, tmp_path):
     model = make_model(demos)
     model.save(tmp_path / "model.zip")
     with zipfile.ZipFile(tmp_path / "model.zip") as archive:
-        assert "expert" not in archive.read("data").decode()
+        saved = json.loads(archive.read("data"))
+        assert "expert" not in saved and model.expert is not None  # the attribute that holds the demos is left out
 
 
 def test_a_crash_while_saving_keeps_the_previous_checkpoint(demos, tmp_path, monkeypatch):
@@ -316,3 +320,78 @@ def test_discriminator_replay_feeds_earlier_rollouts_to_later_updates_and_is_not
     assert model.discriminator_replay.size() == 40  # FIFO capacity
     model.save(tmp_path / "model")
     assert MPAIL.load(tmp_path / "model").discriminator_replay is None
+
+
+def test_the_gradient_penalty_is_the_squared_distance_of_the_discriminators_slope_from_one(demos):
+    planner = dict(TINY_PLANNER, discriminator_hidden_sizes=(), use_spectral_norm=False)  # a linear logit: one slope
+    model = make_model(demos, discriminator_gradient_penalty=10.0, policy_kwargs=planner)
+    (layer,) = [module for module in model.policy.discriminator.modules() if isinstance(module, th.nn.Linear)]
+    generator = th.Generator().manual_seed(0)
+    expert, agent = [tuple(th.randn(8, 3, generator=generator) for _ in range(2)) for _ in range(2)]
+    expected = (layer.weight.detach().norm() - 1) ** 2
+    assert model._gradient_penalty(expert, agent).item() == pytest.approx(expected.item(), rel=1e-5)
+
+
+def test_the_gradient_penalty_enters_every_discriminator_update_only_when_set(demos, monkeypatch):
+    calls = []
+    for weight in (0.0, 10.0):
+        model = make_model(demos, discriminator_update_interval=1, discriminator_gradient_penalty=weight)
+        original = model._gradient_penalty
+        monkeypatch.setattr(model, "_gradient_penalty", lambda *pairs, original=original: calls.append(1) or original(*pairs))
+        model.learn(16)
+        assert len(calls) == (0 if weight == 0 else model.n_epochs * model.n_minibatches)
+        calls.clear()
+
+
+def test_a_layer_normalised_value_levels_off_far_from_the_data(demos):
+    th.manual_seed(0)
+    plain, bounded = make_value_network(3, (32, 32)), make_value_network(3, (32, 32), layer_norm=True)
+    directions = th.randn(16, 3)
+    with th.no_grad():
+        plain_growth = (plain(1e6 * directions) - plain(1e3 * directions)).abs()
+        bounded_growth = (bounded(1e6 * directions) - bounded(1e3 * directions)).abs()
+    assert plain_growth.max() > 1e3  # a ReLU network extrapolates its slope
+    assert bounded_growth.max() < 1e-3
+    model = make_model(demos, policy_kwargs=dict(TINY_PLANNER, value_layer_norm=True, value_features=[0, 1]))
+    assert any(isinstance(module, th.nn.LayerNorm) for module in model.policy.value_net.modules())
+
+
+def test_a_concave_value_never_rises_away_from_its_peak():
+    th.manual_seed(0)
+    value = make_value_network(3, (32, 32), concave=True)
+    points, directions = th.randn(64, 3), th.randn(64, 3)
+    with th.no_grad():
+        along = th.stack([value(points + step * directions).squeeze(-1) for step in th.linspace(0.0, 50.0, 26)])
+    increments = along.diff(dim=0)
+    # concave along every line: the increments never grow, so once the value falls it keeps falling
+    assert (increments.diff(dim=0) <= 1e-4).all()
+    assert (along[-1] < along.max(dim=0).values).any()
+
+
+def test_a_concave_value_plans_behind_a_feature_map_and_refuses_layer_norm(demos):
+    model = make_model(demos, policy_kwargs=dict(TINY_PLANNER, concave_value=True, value_features=[0, 1])).learn(16)
+    assert any(isinstance(module, ConcaveValue) for module in model.policy.value_net.modules())
+    with pytest.raises(ValueError, match="set value_layer_norm or concave_value, not both"):
+        make_model(demos, policy_kwargs=dict(TINY_PLANNER, concave_value=True, value_layer_norm=True))
+
+
+def test_a_discriminator_ensemble_costs_its_mean_logit_less_its_spread_and_trains_every_member(demos, tmp_path):
+    planner = dict(TINY_PLANNER, discriminator_ensemble_size=3, discriminator_disagreement=2.0)
+    model = make_model(demos, discriminator_update_interval=1, policy_kwargs=planner)
+    ensemble = model.policy.discriminator
+    assert isinstance(ensemble, DiscriminatorEnsemble) and len(ensemble.members) == 3
+    before = [th.cat([p.detach().flatten().clone() for p in member.parameters()]) for member in ensemble.members]
+    model.learn(16)
+    after = [th.cat([p.detach().flatten() for p in member.parameters()]) for member in ensemble.members]
+    assert all(not th.equal(old, new) for old, new in zip(before, after))
+    states, next_states = th.randn(5, 3), th.randn(5, 3)
+    model.policy.set_training_mode(False)
+    with th.no_grad():
+        members = th.stack([member(states, None, next_states, None) for member in ensemble.members])
+        expected = members.mean(0) - 2.0 * members.std(0, unbiased=False)
+        assert th.allclose(ensemble(states, None, next_states, None), expected)
+        assert th.allclose(model.policy.planner.step_cost(states, next_states), -expected)
+    observation = np.array([[0.5, 0.5, 0.1]], np.float32)
+    action, _ = model.predict(observation, deterministic=True)
+    model.save(tmp_path / "model")
+    assert np.array_equal(MPAIL.load(tmp_path / "model").predict(observation, deterministic=True)[0], action)

@@ -2,6 +2,7 @@
 
 from sb3_mpail.mppi.costs import (
     AngleFeatures,
+    ConcaveValue,
     TerminalValue,
     TransitionCost,
     make_transition_discriminator,
@@ -19,6 +20,7 @@ from sb3_mpail.mppi.dynamics import (
     TransitionReplayBuffer,
     make_dynamics,
 )
+from sb3_mpail.mppi.ensemble import DiscriminatorEnsemble
 from sb3_mpail.mppi.highway_dynamics import HighwayKinematics, RacetrackKinematics  # also registers them by name
 from sb3_mpail.mppi.planner import MPPIPlanner, PlanResult
 from sb3_mpail.mppi.sampling import ActionSampler, DeltaSampler, GaussianSampler
@@ -28,8 +30,10 @@ __all__ = [
     "DEFAULT_DYNAMICS",
     "DYNAMICS_MODELS",
     "CallableDynamics",
+    "ConcaveValue",
     "ActionSampler",
     "DeltaSampler",
+    "DiscriminatorEnsemble",
     "GaussianSampler",
     "HighwayKinematics",
     "KinematicBicycle",

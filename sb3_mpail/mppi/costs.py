@@ -5,6 +5,7 @@ In MPAIL the step cost is the negated discriminator logit, ``c(s, s') = -d_theta
 is the learned ``V_phi``, so both are thin views of networks the algorithm trains.
 """
 
+import math
 import numbers
 from typing import Any, Callable, List, Mapping, Optional, Sequence, Union
 
@@ -54,9 +55,59 @@ def make_transition_discriminator(
     return discriminator
 
 
-def make_value_network(state_dim: int, hidden_sizes: Sequence[int] = (32, 32)) -> nn.Sequential:
-    """The value ``V_phi(s)``: an MLP with ReLU and a scalar output."""
-    return nn.Sequential(*create_mlp(state_dim, 1, list(hidden_sizes), nn.ReLU))
+def make_value_network(
+    state_dim: int, hidden_sizes: Sequence[int] = (32, 32), layer_norm: bool = False, concave: bool = False
+) -> nn.Module:
+    """
+    The value ``V_phi(s)``: an MLP with ReLU and a scalar output.
+
+    :param state_dim: size of its input
+    :param hidden_sizes: hidden layer widths
+    :param layer_norm: layer-normalise each hidden layer before its ReLU (as MPAIL2's and TD-MPC2's networks do). It
+        bounds the output: far from the data the value levels off along every direction instead of extrapolating its
+        slope linearly, as a plain ReLU network does
+    :param concave: a :class:`ConcaveValue` instead of the MLP (not together with ``layer_norm``)
+    """
+    if concave:
+        if layer_norm:
+            raise ValueError("A concave value has no layer normalisation: set value_layer_norm or concave_value, not both.")
+        return ConcaveValue(state_dim, hidden_sizes)
+    if not layer_norm:
+        return nn.Sequential(*create_mlp(state_dim, 1, list(hidden_sizes), nn.ReLU))
+    layers: List[nn.Module] = []
+    for n_in, n_out in zip([state_dim, *hidden_sizes], hidden_sizes):
+        layers += [nn.Linear(n_in, n_out), nn.LayerNorm(n_out), nn.ReLU()]
+    return nn.Sequential(*layers, nn.Linear(hidden_sizes[-1] if hidden_sizes else state_dim, 1))
+
+
+class ConcaveValue(nn.Module):
+    """
+    A value that is concave in its inputs: a negated input-convex network (Amos et al., 2017). Each hidden layer is
+    ``relu(W_z z + W_x x + b)`` with ``W_z >= 0`` (the softplus of free weights), the output the negation of a
+    non-negative combination of the last layer plus a linear term in ``x``. It peaks on one region it learns and
+    falls away from it in every direction, so far from the data it never rises, where a ReLU MLP extrapolates
+    whatever slope it has learned (on navigation: rising past the goal).
+
+    :param in_size: size of its input
+    :param hidden_sizes: hidden layer widths
+    """
+
+    def __init__(self, in_size: int, hidden_sizes: Sequence[int] = (32, 32)):
+        super().__init__()
+        sizes = list(hidden_sizes)
+        self.input_layers = nn.ModuleList(nn.Linear(in_size, n_out) for n_out in [*sizes, 1])
+        self.hidden_weights = nn.ParameterList(
+            # softplus(w) starts near 1 / n_in, a fan-in scale, with a little noise to break symmetry
+            nn.Parameter(math.log(math.expm1(1.0 / n_in)) + 0.1 * th.randn(n_out, n_in))
+            for n_in, n_out in zip(sizes, [*sizes[1:], 1])
+        )
+
+    def forward(self, inputs: th.Tensor) -> th.Tensor:
+        convex = self.input_layers[0](inputs)
+        for input_layer, weight in zip(self.input_layers[1:], self.hidden_weights):
+            # a non-negative combination of convex functions of the inputs, plus an affine one, stays convex
+            convex = nn.functional.linear(th.relu(convex), nn.functional.softplus(weight)) + input_layer(inputs)
+        return -convex
 
 
 def _state_indices(indices: Any, name: str) -> List[int]:
