@@ -692,15 +692,13 @@ class MPAIL(BaseAlgorithm):
                     batch_next_features = th.cat((batch_next_features, self._tensor(replayed["next_features"])))
                 expert_batch = th.randint(len(expert_observations), (len(batch_features),), device=self.device)
                 # (members, batch): an ensemble's members each learn from the whole batch
+                expert_pair = (expert_observations[expert_batch], expert_next_observations[expert_batch])
                 agent_logits = member_logits(discriminator, batch_features, batch_next_features)
-                expert_logits = member_logits(
-                    discriminator, expert_observations[expert_batch], expert_next_observations[expert_batch]
-                )
+                expert_logits = member_logits(discriminator, *expert_pair)
                 logits = th.cat((expert_logits, agent_logits), dim=1)
                 labels = th.cat((th.ones_like(expert_logits), th.zeros_like(agent_logits)), dim=1)
                 loss = F.binary_cross_entropy_with_logits(logits, labels)
                 if self.discriminator_gradient_penalty > 0:
-                    expert_pair = (expert_observations[expert_batch], expert_next_observations[expert_batch])
                     penalty = self._gradient_penalty(expert_pair, (batch_features, batch_next_features))
                     loss = loss + self.discriminator_gradient_penalty * penalty
                 self.discriminator_optimizer.zero_grad()
