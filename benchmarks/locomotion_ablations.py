@@ -59,7 +59,12 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
     ),
     "prior-bootstraps-terminations": dict(
         question="the prior's Q targets bootstrap through terminations (MPAIL2's default)",
-        changes=dict(prior_use_terminations=False),
+        changes=dict(prior_terminations="bootstrap"),
+    ),
+    "absorbing-terminations": dict(
+        question="the prior's Q targets take a termination as an absorbing state whose reward is the terminal "
+        "transition's (DAC's answer to a learned reward's sign on tasks that end episodes)",
+        changes=dict(prior_terminations="absorbing"),
     ),
     "prior-updates-1": dict(question="one prior update per env step", changes=dict(prior_updates_per_step=1.0)),
     "prior-128": dict(
@@ -89,7 +94,10 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
 
 
 class TrainingCurve(BaseCallback):
-    """At every rollout's end: env steps, and the mean length and return of the last 100 training episodes."""
+    """
+    At every rollout's end: env steps, the mean length and return of the last 100 training episodes, and the mean
+    learned reward of the rollout (is the agent paid to live or to end its episodes?).
+    """
 
     def __init__(self) -> None:
         super().__init__()
@@ -102,7 +110,11 @@ class TrainingCurve(BaseCallback):
         episodes = self.model.ep_info_buffer
         if episodes:
             lengths, returns = [episode["l"] for episode in episodes], [episode["r"] for episode in episodes]
-            self.points.append([self.num_timesteps, round(float(np.mean(lengths)), 1), round(float(np.mean(returns)), 1)])
+            learned_reward = self.model.logger.name_to_value["rollout/learned_reward_mean"]
+            self.points.append([
+                self.num_timesteps, round(float(np.mean(lengths)), 1), round(float(np.mean(returns)), 1),
+                round(float(learned_reward), 3),
+            ])  # fmt: skip
 
 
 def variant_settings(env_id: str, name: str) -> Dict[str, Any]:
@@ -147,7 +159,7 @@ def run_variant(
         score=normalised_score(figures["return"], reference), speed_ratio=figures["forward_speed"] / reference[
             "expert_forward_speed"], **figures,
     )  # fmt: skip
-    result["training_curve"] = curve.points  # env steps, mean length and return of the last 100 training episodes
+    result["training_curve"] = curve.points  # env steps, mean length and return of the last 100 episodes, learned reward
     result["settings"] = settings  # what the variant's name meant when it ran: the zoo entry may change later
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(result, default=repr))

@@ -50,7 +50,7 @@ from sb3_mpail.demos import DemoSource, ExpertTransitions, load_demos
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, ENV_DYNAMICS_KWARGS, LearnedDynamics, how_to_give_dynamics
 from sb3_mpail.mppi.ensemble import member_logits
 from sb3_mpail.policies import NON_FINITE_OBSERVATION, MlpMPPI, MPPIPolicy
-from sb3_mpail.prior import PriorReplay
+from sb3_mpail.prior import PRIOR_TERMINATIONS, PriorReplay
 
 SelfMPAIL = TypeVar("SelfMPAIL", bound="MPAIL")
 #: settings every MPAIL model file holds and other algorithms' files do not
@@ -123,8 +123,10 @@ class MPAIL(BaseAlgorithm):
     :param prior_buffer_size: transitions the policy prior's replay keeps (with ``policy_kwargs=dict(policy_prior=True)``)
     :param prior_batch_size: minibatch size of the prior's SAC updates
     :param prior_updates_per_step: SAC updates of the prior per env step (summed over envs), run after each rollout
-    :param prior_use_terminations: the prior's Q targets stop at terminations (e.g. a fall), as SAC's do; ``False``
-        bootstraps through them (MPAIL2's default), which let the Ant fall in most episodes here
+    :param prior_terminations: what the prior's Q targets do at a termination (e.g. a fall): ``"cut"`` stops them, as
+        SAC's do; ``"bootstrap"`` goes on through it (MPAIL2's default), which let the Ant fall in most episodes here;
+        ``"absorbing"`` lets the terminal transition's learned reward repeat forever (an absorbing state, as DAC's),
+        so ending an episode is worth what the discriminator thinks of how it ends, whatever the reward's offset
     :param stats_window_size: episodes averaged in the logged episode return
     :param tensorboard_log: tensorboard log folder
     :param policy_kwargs: keyword arguments of the policy (planner settings, ``dynamics``)
@@ -168,7 +170,7 @@ class MPAIL(BaseAlgorithm):
         prior_buffer_size: int = 1_000_000,
         prior_batch_size: int = 256,
         prior_updates_per_step: float = 1.0,
-        prior_use_terminations: bool = True,
+        prior_terminations: str = "cut",
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         policy_kwargs: Dict[str, Any] | None = None,
@@ -214,7 +216,7 @@ class MPAIL(BaseAlgorithm):
         self.prior_buffer_size = prior_buffer_size
         self.prior_batch_size = prior_batch_size
         self.prior_updates_per_step = prior_updates_per_step
-        self.prior_use_terminations = prior_use_terminations
+        self.prior_terminations = prior_terminations
         self.prior_replay: PriorReplay | None = None
         self.episodes_completed = 0
         self.n_iterations = 0
@@ -258,7 +260,7 @@ class MPAIL(BaseAlgorithm):
             prior_buffer_size=(self.prior_buffer_size, POSITIVE_INTEGER),
             prior_batch_size=(self.prior_batch_size, POSITIVE_INTEGER),
             prior_updates_per_step=(self.prior_updates_per_step, NON_NEGATIVE_NUMBER),
-            prior_use_terminations=(self.prior_use_terminations, BOOLEAN),
+            prior_terminations=(self.prior_terminations, one_of(PRIOR_TERMINATIONS)),
             stats_window_size=(self._stats_window_size, POSITIVE_INTEGER),
             policy_kwargs=(self.policy_kwargs, OPTIONAL_DICT),
             verbose=(self.verbose, NON_NEGATIVE_INTEGER),
@@ -637,7 +639,7 @@ class MPAIL(BaseAlgorithm):
                 self.prior_batch_size,
                 self.prior_updates_per_step,
                 self.device,
-                self.prior_use_terminations,
+                self.prior_terminations,
             )
         return self.prior_replay
 

@@ -18,6 +18,9 @@ from torch import nn
 
 from sb3_mpail.checks import FRACTION, HIDDEN_SIZES, POSITIVE_INTEGER, POSITIVE_NUMBER, UNIT_INTERVAL, check_arguments
 
+#: what the prior's Q targets do where an episode terminated (see :class:`PriorReplay`)
+PRIOR_TERMINATIONS = ("cut", "bootstrap", "absorbing")
+
 
 class PolicyPrior(nn.Module):
     """
@@ -193,8 +196,9 @@ class PriorReplay:
     :param batch_size: minibatch size of an update
     :param updates_per_step: prior updates per env step (summed over envs)
     :param device: where minibatches are put
-    :param use_terminations: zero the next state's value where an episode terminated (e.g. a fall), as SAC does;
-        ``False`` bootstraps through terminations (MPAIL2's default)
+    :param terminations: one of :data:`PRIOR_TERMINATIONS`: ``"cut"`` zeroes the next state's value where an episode
+        terminated (e.g. a fall), as SAC does; ``"bootstrap"`` goes on through terminations (MPAIL2's default);
+        ``"absorbing"`` takes the terminal transition's reward ``r`` as repeating forever, ``r / (1 - gamma)``
     """
 
     def __init__(
@@ -206,7 +210,7 @@ class PriorReplay:
         batch_size: int,
         updates_per_step: float,
         device: th.device,
-        use_terminations: bool = True,
+        terminations: str = "cut",
     ):
         self.buffer = ReplayBuffer(
             max(buffer_size // n_envs, 1),
@@ -218,7 +222,7 @@ class PriorReplay:
         )
         self.batch_size = batch_size
         self.updates_per_step = updates_per_step
-        self.use_terminations = use_terminations
+        self.terminations = terminations
 
     def add(
         self, prior: PolicyPrior, observations: np.ndarray, next_observations: np.ndarray, actions: np.ndarray,
@@ -247,7 +251,9 @@ class PriorReplay:
             states, next_states = batch.observations.float(), batch.next_observations.float()
             with th.no_grad():
                 rewards = reward(states, next_states).reshape(-1, 1)
-            dones = batch.dones.float() if self.use_terminations else th.zeros_like(rewards)
+            dones = th.zeros_like(rewards) if self.terminations == "bootstrap" else batch.dones.float()
+            if self.terminations == "absorbing":  # r + gamma r / (1 - gamma): the same for any offset added to r
+                rewards = rewards + dones * prior.gamma * rewards / (1 - prior.gamma)
             update = prior.update(states, batch.actions.float(), next_states, rewards, dones)
             for name, value in {**update, "reward": float(rewards.mean())}.items():
                 figures.setdefault(name, []).append(value)

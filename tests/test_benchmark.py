@@ -179,5 +179,5 @@ def test_a_locomotion_ablation_run_records_its_training_curve(tmp_path):
     path = locomotion_ablations.run_variant("Hopper-v4", "defaults", 0, 1000, 1, tmp_path, "c")
     curve = json.loads(path.read_text())["training_curve"]
     assert [point[0] for point in curve] == [1000]  # one rollout of 4 envs x 250 steps
-    steps, length, episode_return = curve[0]
-    assert 0 < length <= 250 and np.isfinite(episode_return)
+    steps, length, episode_return, learned_reward = curve[0]
+    assert 0 < length <= 250 and np.isfinite(episode_return) and np.isfinite(learned_reward)

@@ -86,22 +86,32 @@ def test_a_seeded_run_with_a_prior_is_reproducible_and_its_reloaded_copy_plans_t
 
 
 class RecordingPrior(PolicyPrior):
-    """A prior that records the termination flags its updates are given."""
+    """A prior that records the rewards, termination flags and next states its updates are given."""
 
     def update(self, states, unit_actions, next_states, rewards, dones):
-        self.dones_seen = dones
+        self.seen = dict(rewards=rewards.squeeze(1), dones=dones.squeeze(1), next_states=next_states)
         return {}
 
 
-@pytest.mark.parametrize("use_terminations", [False, True])
-def test_the_priors_targets_stop_at_terminations_unless_told_to_bootstrap_through_them(use_terminations):
+@pytest.mark.parametrize(
+    "terminations, flags_terminations, terminal_reward_factor",
+    [("cut", True, 1.0), ("bootstrap", False, 1.0), ("absorbing", True, 1 / (1 - 0.99))],
+)
+def test_the_priors_targets_cut_bootstrap_or_repeat_the_terminal_reward_at_terminations(
+    terminations, flags_terminations, terminal_reward_factor
+):
     observation_space, action_space = spaces.Box(-1, 1, (2,)), spaces.Box(-1, 1, (1,))
-    prior = RecordingPrior(observation_space, action_space, net_arch=(4,))
-    replay = PriorReplay(observation_space, action_space, 1, 16, 4, 1.0, th.device("cpu"), use_terminations)
-    for _ in range(4):  # every stored step ends an episode by termination (a fall), not by the time limit
-        replay.add(prior, np.zeros((1, 2)), np.ones((1, 2)), np.zeros((1, 1)), np.ones(1, bool), [{}])
-    replay.train(prior, lambda states, next_states: states.sum(1), n_new_steps=1)
-    assert prior.dones_seen.tolist() == [[float(use_terminations)]] * 4
+    prior = RecordingPrior(observation_space, action_space, net_arch=(4,), gamma=0.99)
+    replay = PriorReplay(observation_space, action_space, 1, 64, 16, 1.0, th.device("cpu"), terminations)
+    for terminated in [True, False] * 8:  # falls (terminations, not time-limit cuts) end in (1, 1), other steps (0.5, 0.5)
+        next_state = np.full((1, 2), 1.0 if terminated else 0.5)
+        replay.add(prior, np.zeros((1, 2)), next_state, np.zeros((1, 1)), np.array([terminated]), [{}])
+    replay.train(prior, lambda states, next_states: next_states.sum(1), n_new_steps=1)  # 2 for a fall, 1 otherwise
+    terminal = prior.seen["next_states"][:, 0] == 1.0
+    assert terminal.any() and not terminal.all()
+    assert th.equal(prior.seen["dones"], (terminal & flags_terminations).float())
+    expected = th.where(terminal, 2.0 * terminal_reward_factor, 1.0)
+    assert th.allclose(prior.seen["rewards"], expected)
 
 
 @pytest.mark.parametrize(
@@ -113,7 +123,7 @@ def test_the_priors_targets_stop_at_terminations_unless_told_to_bootstrap_throug
         (dict(policy_prior="yes"), {}, "policy_prior"),
         ({}, dict(prior_updates_per_step=-1), "prior_updates_per_step"),
         ({}, dict(prior_batch_size=0), "prior_batch_size"),
-        ({}, dict(prior_use_terminations="no"), "prior_use_terminations"),
+        ({}, dict(prior_terminations="never"), "prior_terminations"),
     ],
 )
 def test_bad_prior_settings_are_refused_naming_them(demos, policy_kwargs, settings, named):
