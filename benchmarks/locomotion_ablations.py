@@ -30,8 +30,7 @@ import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 
-from benchmarks.report import machine_description, machines_of, write_section
-from benchmarks.runner import format_ci, mean_ci
+from benchmarks.report import format_ci, machine_description, machines_of, mean_ci, write_section
 from benchmarks.scenarios import zoo_hyperparameters
 from sb3_mpail import MPAIL
 from sb3_mpail.demos import shipped_demo_info

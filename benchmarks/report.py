@@ -1,9 +1,11 @@
 """Writes one benchmark's results into its own section of BENCHMARKS.md, leaving the other sections alone."""
 
+import math
 import platform
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, Sequence, Tuple
 
+import numpy as np
 import torch as th
 
 BENCHMARKS_FILE = Path(__file__).resolve().parent.parent / "BENCHMARKS.md"
@@ -53,3 +55,22 @@ def write_section(name: str, markdown: str, path: Path = BENCHMARKS_FILE) -> Non
     partial = path.with_name(path.name + ".partial")
     partial.write_text(text)
     partial.replace(path)
+
+
+def mean_ci(values: Sequence[float]) -> Tuple[float, float]:
+    """
+    The mean and the half-width of its 95% confidence interval (Student's t; NaN for fewer than two values).
+
+    :param values: one value per seed
+    """
+    from scipy import stats
+
+    values = np.asarray(values, dtype=float)
+    if len(values) < 2:
+        return float(values.mean()), math.nan
+    return float(values.mean()), float(stats.t.ppf(0.975, len(values) - 1) * values.std(ddof=1) / math.sqrt(len(values)))
+
+
+def format_ci(mean: float, half_width: float, digits: int = 2) -> str:
+    """``mean ± half_width`` (just the mean when the half-width is NaN)."""
+    return f"{mean:.{digits}f}" + ("" if math.isnan(half_width) else f" ± {half_width:.{digits}f}")

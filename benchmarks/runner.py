@@ -22,7 +22,6 @@ its runs are measured as ``benchmarks/scenarios.py`` measures MPAIL's, by the cr
 
 import argparse
 import json
-import math
 import multiprocessing
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -33,7 +32,7 @@ import numpy as np
 import torch as th
 
 from benchmarks.baselines import ALGO_LABELS, ALGOS, ENV_NAMES, env_id_of, env_name_of, load_config, train_baseline
-from benchmarks.report import BENCHMARKS_FILE, machine_description, machines_of, write_section
+from benchmarks.report import BENCHMARKS_FILE, format_ci, machine_description, machines_of, mean_ci, write_section
 from benchmarks.scenarios import RESULTS as SCENARIO_RESULTS
 from benchmarks.scenarios import SCENARIOS, lap_figures
 from sb3_mpail.demos import list_shipped_demos, shipped_demo_info, shipped_demos
@@ -301,25 +300,6 @@ def load_results(results_dir: Path, name: str) -> List[Dict[str, Any]]:
     :param name: :func:`grid_name`
     """
     return [json.loads(path.read_text()) for path in sorted((Path(results_dir) / name).glob("*.json"))]
-
-
-def mean_ci(values: Sequence[float]) -> Tuple[float, float]:
-    """
-    The mean and the half-width of its 95% confidence interval (Student's t; NaN for fewer than two values).
-
-    :param values: one value per seed
-    """
-    from scipy import stats
-
-    values = np.asarray(values, dtype=float)
-    if len(values) < 2:
-        return float(values.mean()), math.nan
-    return float(values.mean()), float(stats.t.ppf(0.975, len(values) - 1) * values.std(ddof=1) / math.sqrt(len(values)))
-
-
-def format_ci(mean: float, half_width: float, digits: int = 2) -> str:
-    """``mean ± half_width`` (just the mean when the half-width is NaN)."""
-    return f"{mean:.{digits}f}" + ("" if math.isnan(half_width) else f" ± {half_width:.{digits}f}")
 
 
 def steps_summary(runs: Sequence[Dict[str, Any]]) -> str:

@@ -25,6 +25,7 @@ the notes of ``benchmarks/scenarios_notes.md`` (``--report-only`` rebuilds it wi
 
 import argparse
 import json
+import math
 import time
 from functools import partial
 from pathlib import Path
@@ -36,7 +37,7 @@ import yaml
 from stable_baselines3.common.env_util import make_vec_env
 
 import sb3_mpail.envs  # noqa: F401  (registers the package's envs)
-from benchmarks.report import machine_description, write_section
+from benchmarks.report import format_ci, machine_description, mean_ci, write_section
 from sb3_mpail import MPAIL
 from sb3_mpail.demos import shipped_demo_info, shipped_demos
 from sb3_mpail.envs.ant import evaluate_ant
@@ -46,6 +47,8 @@ from sb3_mpail.evaluation import evaluate_episodes, normalised_score
 from sb3_mpail.zoo import HYPERPARAMS
 
 RESULTS = Path(__file__).resolve().parent / "figures" / "scenarios.json"
+#: each finished seed's figures, so that an interrupted run goes on where it stopped
+RUNS_DIR = Path(__file__).resolve().parent / "results" / "scenarios"
 #: how each scenario's settings were chosen, what failed and what is left: written by hand, appended to the section
 NOTES = Path(__file__).resolve().parent / "scenarios_notes.md"
 EVAL_SEED = 10_000
@@ -102,7 +105,8 @@ def parking_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, flo
 def parking_reference(stats: Dict) -> str:
     return (
         f"Expert ({stats['expert_algo']}) {stats['expert_return_mean']:.1f}, parked in {stats['expert_success_rate']:.0%} "
-        f"of {stats['n_eval_episodes']} episodes; random {stats['random_return_mean']:.1f}, "
+        f"of {stats['n_eval_episodes']} episodes, crashed in {stats.get('expert_crash_rate', math.nan):.0%}; random "
+        f"{stats['random_return_mean']:.1f}, "
         f"{stats['random_success_rate']:.0%} parked."
     )
 
@@ -220,11 +224,11 @@ SCENARIOS: Dict[str, Scenario] = {
     "parking": Scenario(
         "sb3_mpail/Parking-v0",
         "parking",
-        "highway-env parking-v0 from 4 scripted-expert demos (observations only)",
+        "highway-env parking-v0 (walls on) from 16 scripted-expert demos that stop in the slot (observations only)",
         parking_figures,
-        (("return", "return"), ("score", "normalised score"), ("success", "success rate"), ("crashed", "crash rate")),
+        (("success", "success rate"), ("crashed", "crash rate"), ("return", "return"), ("score", "normalised score")),
         parking_reference,
-        10,
+        20,
     ),
     "racetrack": Scenario(
         "sb3_mpail/Racetrack-v0",
@@ -275,29 +279,48 @@ def zoo_hyperparameters(env_id: str) -> Dict:
     return entry
 
 
-def run_seed(scenario: Scenario, stats: Dict, seed: int, n_eval_episodes: int) -> Dict:
+def run_seed(name: str, stats: Dict, seed: int, runs_dir: Path = RUNS_DIR) -> Dict:
+    """
+    Trains and evaluates one seed of a scenario, or reads its stored figures if this seed already ran with the entry's
+    current hyperparameters and evaluation episodes (an interrupted run goes on from the seeds it finished).
+
+    :param name: the scenario's key in :data:`SCENARIOS`
+    :param stats: the shipped demos' information
+    :param seed: the seed
+    :param runs_dir: where each seed's figures are stored
+    """
+    scenario = SCENARIOS[name]
     hyperparameters = zoo_hyperparameters(scenario.env_id)
+    settings = {"hyperparameters": repr(hyperparameters), "n_eval_episodes": scenario.n_eval_episodes}
+    path = Path(runs_dir) / f"{name}_seed{seed}.json"
+    if path.exists():
+        stored = json.loads(path.read_text())
+        if stored["settings"] == settings:
+            return stored["run"]
     n_envs, timesteps = hyperparameters.pop("n_envs"), int(hyperparameters.pop("n_timesteps"))
     model = MPAIL("MlpMPPI", make_vec_env(scenario.env_id, n_envs=n_envs, seed=seed), seed=seed, **hyperparameters)
     start = time.time()
     model.learn(timesteps)
     seconds = time.time() - start
-    return {"seed": seed, **scenario.figures(model, stats, n_eval_episodes), "seconds": seconds}
+    run = {"seed": seed, **scenario.figures(model, stats, scenario.n_eval_episodes), "seconds": seconds}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"settings": settings, "run": run}, indent=2) + "\n")
+    return run
 
 
-def mean_and_std(runs: List[Dict], key: str) -> str:
-    values = [run[key] for run in runs]
-    return f"{np.mean(values):.3f} ± {np.std(values):.3f}"
+def mean_and_ci(runs: List[Dict], key: str) -> str:
+    """A figure's mean over the seeds ± the half-width of its 95% confidence interval."""
+    return format_ci(*mean_ci([run[key] for run in runs]), digits=3)
 
 
 def summary_table(results: Dict[str, Dict]) -> str:
-    """One row per scenario: its budget, seeds and every figure's mean ± std over the seeds."""
+    """One row per scenario: its budget, seeds and every figure's mean ± 95% CI over the seeds."""
     rows = []
     for name, result in results.items():
         scenario, runs = SCENARIOS[name], result["runs"]
-        figures = "; ".join(f"{title} {mean_and_std(runs, key)}" for key, title in scenario.columns)
+        figures = "; ".join(f"{title} {mean_and_ci(runs, key)}" for key, title in scenario.columns)
         rows.append(f"| `{name}` | `{scenario.env_id}` | {result['timesteps']} | {len(runs)} | {figures} |")
-    header = "| scenario | env | env steps per seed | seeds | figures (mean ± std over seeds) |\n|---|---|---|---|---|\n"
+    header = "| scenario | env | env steps per seed | seeds | figures (mean ± 95% CI over seeds) |\n|---|---|---|---|---|\n"
     return header + "\n".join(rows)
 
 
@@ -318,7 +341,7 @@ def section(results: Dict[str, Dict]) -> str:
             f"| {run['seed']} | " + " | ".join(f"{run[key]:.3f}" for key in keys) + f" | {run['seconds']:.0f} |"
             for run in runs
         )
-        summary = " | ".join(f"**{mean_and_std(runs, key)}**" for key in keys)
+        summary = " | ".join(f"**{mean_and_ci(runs, key)}**" for key in keys)
         parts.append(
             f"""### {scenario.title}: `{scenario.env_id}`
 
@@ -328,7 +351,7 @@ evaluation episodes per seed. {scenario.reference(result['stats'])} (`sb3_mpail/
 | seed | {" | ".join(title for _, title in scenario.columns)} | train seconds |
 |---|{"---|" * len(keys)}---|
 {rows}
-| mean ± std over {len(runs)} seeds | {summary} | |
+| mean ± 95% CI over {len(runs)} seeds | {summary} | |
 
 Command: `{result['command']}` on {result['machine']}. Zoo equivalent (one seed):
 `python -m sb3_mpail.zoo train --algo mpail --env {SCENARIOS[name].env_id}`."""
@@ -355,7 +378,7 @@ def main() -> None:
     stats = shipped_demo_info(scenario.demos)
     runs: List[Dict] = []
     for seed in args.seeds:
-        runs.append(run_seed(scenario, stats, seed, scenario.n_eval_episodes))
+        runs.append(run_seed(args.scenario, stats, seed))
         print(runs[-1], flush=True)
     hyperparameters = zoo_hyperparameters(scenario.env_id)
     result = {

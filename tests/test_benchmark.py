@@ -181,3 +181,29 @@ def test_a_locomotion_ablation_run_records_its_training_curve(tmp_path):
     assert [point[0] for point in curve] == [1000]  # one rollout of 4 envs x 250 steps
     steps, length, episode_return, learned_reward = curve[0]
     assert 0 < length <= 250 and np.isfinite(episode_return) and np.isfinite(learned_reward)
+
+
+def test_a_scenario_seed_that_already_ran_with_the_same_settings_is_read_back_not_retrained(tmp_path, monkeypatch):
+    from benchmarks import scenarios
+
+    trained = []
+
+    class CountingMPAIL:
+        def __init__(self, *args, **kwargs):
+            trained.append(kwargs["seed"])
+
+        def learn(self, timesteps):
+            return self
+
+    monkeypatch.setattr(scenarios, "MPAIL", CountingMPAIL)
+    monkeypatch.setattr(scenarios, "make_vec_env", lambda *args, **kwargs: None)
+    monkeypatch.setitem(scenarios.SCENARIOS, "cartpole", scenarios.SCENARIOS["cartpole"]._replace(
+        figures=lambda model, stats, n_episodes: {"return": 1.0, "score": 0.5}))  # fmt: skip
+    first = scenarios.run_seed("cartpole", {}, 3, tmp_path)
+    again = scenarios.run_seed("cartpole", {}, 3, tmp_path)
+    assert trained == [3] and again == first and first["score"] == 0.5
+    stored = json.loads((tmp_path / "cartpole_seed3.json").read_text())
+    stored["settings"]["n_eval_episodes"] += 1  # the settings changed since: the seed runs again
+    (tmp_path / "cartpole_seed3.json").write_text(json.dumps(stored))
+    scenarios.run_seed("cartpole", {}, 3, tmp_path)
+    assert trained == [3, 3]
