@@ -7,6 +7,8 @@ from collections.abc import Mapping, Sequence
 from typing import Any, Callable, NamedTuple, Tuple
 
 import numpy as np
+from gymnasium.wrappers import NormalizeObservation
+from stable_baselines3.common.vec_env import VecEnv, unwrap_vec_normalize
 
 
 class Rule(NamedTuple):
@@ -130,3 +132,24 @@ def check_finite(array: np.ndarray, what: str, advice: str) -> None:
         first = f"env {bad[0]}: {rows[bad[0]]}"
         envs = first if len(bad) == 1 else f"envs {bad.tolist()} ({first})"
         raise ValueError(f"{what} holds NaN or infinite values for {envs}; {advice}")
+
+
+def refuse_normalised_observations(env: VecEnv) -> None:
+    """
+    Refuses an environment whose observations are normalised (SB3's ``VecNormalize`` with ``norm_obs``, gymnasium's
+    ``NormalizeObservation``): the planner rolls them through a dynamics model of the raw states.
+
+    :param env: the environment, wrapped as a ``VecEnv``
+    :raises ValueError: its observations are normalised
+    """
+    vec_normalize = unwrap_vec_normalize(env)
+    wrapped = [index for index, is_wrapped in enumerate(env.env_is_wrapped(NormalizeObservation)) if is_wrapped]
+    if (vec_normalize is None or not vec_normalize.norm_obs) and not wrapped:
+        return
+    wrapper = "VecNormalize(norm_obs=True)" if not wrapped else f"gymnasium's NormalizeObservation (env {wrapped[0]})"
+    raise ValueError(
+        f"MPAIL needs the environment's raw observations, but this one is wrapped in {wrapper}: the planner rolls "
+        "observations through a dynamics model of the raw states, and its learned cost and value judge the states that "
+        "model predicts. Pass the environment without the wrapper (rl_zoo3: normalize: false). Rewards may stay "
+        "normalised (VecNormalize(norm_obs=False)): MPAIL learns its own."
+    )

@@ -2,29 +2,24 @@
 
 import inspect
 import io
-import json
 import math
-import os
 import pathlib
 import sys
 import time
-import zipfile
 from collections.abc import Mapping
 from typing import Any, ClassVar, Dict, Iterable, List, Tuple, Type, TypeVar, Union
 
-import cloudpickle
 import gymnasium as gym
 import numpy as np
 import torch as th
 from gymnasium import spaces
-from gymnasium.wrappers import NormalizeObservation
 from imitation.data.buffer import Buffer
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 from stable_baselines3.common.utils import explained_variance, safe_mean
-from stable_baselines3.common.vec_env import VecEnv, unwrap_vec_normalize
+from stable_baselines3.common.vec_env import VecEnv
 from torch.nn import functional as F
 
 from sb3_mpail.buffers import TransitionRolloutBuffer
@@ -45,8 +40,10 @@ from sb3_mpail.checks import (
     check_arguments,
     check_finite,
     one_of,
+    refuse_normalised_observations,
 )
 from sb3_mpail.demos import DemoSource, ExpertTransitions, load_demos
+from sb3_mpail.model_files import check_model_file, raise_for_unpicklable_settings, save_atomically
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, ENV_DYNAMICS_KWARGS, LearnedDynamics, how_to_give_dynamics
 from sb3_mpail.mppi.ensemble import member_logits
 from sb3_mpail.policies import NON_FINITE_OBSERVATION, MlpMPPI, MPPIPolicy
@@ -54,8 +51,6 @@ from sb3_mpail.prior import PRIOR_TERMINATIONS, PriorReplay
 
 SelfMPAIL = TypeVar("SelfMPAIL", bound="MPAIL")
 #: settings every MPAIL model file holds and other algorithms' files do not
-MPAIL_SETTINGS = ("discriminator_learning_rate", "initial_temperature", "episodes_completed")
-
 #: constructor settings that Stable-Baselines3's ``load`` must set under another attribute name
 _SETTING_ATTRIBUTES = {"temperature": "temperature_mode", "stats_window_size": "_stats_window_size"}
 
@@ -225,7 +220,7 @@ class MPAIL(BaseAlgorithm):
         self._check_settings()
         if env is not None:
             self._check_spaces()
-            _refuse_normalised_observations(self.env)
+            refuse_normalised_observations(self.env)
             if _init_setup_model:  # not when loading: the file holds the model's own dynamics
                 self._default_dynamics()
         if _init_setup_model:
@@ -346,7 +341,7 @@ class MPAIL(BaseAlgorithm):
         :param force_reset: reset it before training goes on
         """
         env = self._wrap_env(env, self.verbose)
-        _refuse_normalised_observations(env)
+        refuse_normalised_observations(env)
         super().set_env(env, force_reset)
 
     def set_random_seed(self, seed: int | None = None) -> None:
@@ -424,7 +419,7 @@ class MPAIL(BaseAlgorithm):
         :raises ValueError: the file is empty, truncated, damaged or not a zip archive, or it is not an MPAIL model;
             ``kwargs`` hold a setting MPAIL does not have, ``demos`` or another ``temperature`` mode than the model's
         """
-        source, data = _check_model_file(path)
+        source, data = check_model_file(path)
         if "temperature" in kwargs and kwargs["temperature"] != data.get("temperature_mode"):
             raise ValueError(
                 f"temperature is fixed when a model is made: this one's is {data.get('temperature_mode')!r}; got "
@@ -472,23 +467,11 @@ class MPAIL(BaseAlgorithm):
         if isinstance(path, io.BufferedIOBase):
             super().save(path, exclude, include)
             return
-        destination = pathlib.Path(path)
-        if destination.suffix == "":
-            destination = destination.with_name(destination.name + ".zip")
-        destination = destination.resolve()  # through symbolic links, to the file they name
-        if destination.exists() and not destination.stat().st_mode & 0o222:  # by mode, as root too
-            raise PermissionError(f"{destination} is read-only: MPAIL.save does not overwrite it (chmod u+w to allow).")
-        destination.parent.mkdir(parents=True, exist_ok=True)
-        partial = destination.with_name(destination.name + ".partial")
         try:
-            with open(partial, "wb") as file:  # closed whatever happens (Stable-Baselines3 leaves its own open on errors)
-                super().save(file, exclude, include)
-            os.replace(partial, destination)
+            save_atomically(path, lambda file: super(MPAIL, self).save(file, exclude, include))
         except Exception as error:
-            _raise_for_unpicklable_settings(self.policy_kwargs, error)
+            raise_for_unpicklable_settings(self.policy_kwargs, error)
             raise
-        finally:
-            partial.unlink(missing_ok=True)
 
     def learn(
         self: SelfMPAIL,
@@ -771,99 +754,3 @@ class MPAIL(BaseAlgorithm):
         self.logger.record("time/time_elapsed", int(time_elapsed), exclude="tensorboard")
         self.logger.record("time/total_timesteps", self.num_timesteps, exclude="tensorboard")
         self.logger.dump(step=self.num_timesteps)
-
-
-def _refuse_normalised_observations(env: VecEnv) -> None:
-    """
-    Refuses an environment whose observations are normalised (SB3's ``VecNormalize`` with ``norm_obs``, gymnasium's
-    ``NormalizeObservation``): the planner rolls them through a dynamics model of the raw states.
-
-    :param env: the environment, wrapped as a ``VecEnv``
-    :raises ValueError: its observations are normalised
-    """
-    vec_normalize = unwrap_vec_normalize(env)
-    wrapped = [index for index, is_wrapped in enumerate(env.env_is_wrapped(NormalizeObservation)) if is_wrapped]
-    if (vec_normalize is None or not vec_normalize.norm_obs) and not wrapped:
-        return
-    wrapper = "VecNormalize(norm_obs=True)" if not wrapped else f"gymnasium's NormalizeObservation (env {wrapped[0]})"
-    raise ValueError(
-        f"MPAIL needs the environment's raw observations, but this one is wrapped in {wrapper}: the planner rolls "
-        "observations through a dynamics model of the raw states, and its learned cost and value judge the states that "
-        "model predicts. Pass the environment without the wrapper (rl_zoo3: normalize: false). Rewards may stay "
-        "normalised (VecNormalize(norm_obs=False)): MPAIL learns its own."
-    )
-
-
-def _raise_for_unpicklable_settings(policy_kwargs: Dict[str, Any], error: Exception) -> None:
-    """
-    After ``save`` failed with ``error``: refuses the first ``policy_kwargs`` setting cloudpickle cannot pickle (what
-    Stable-Baselines3 saves them with), naming it; returns when they all pickle (``error`` has another cause).
-
-    :raises TypeError: a setting cannot be pickled
-    """
-    for key, value in policy_kwargs.items():
-        try:
-            cloudpickle.dumps(value)
-        except Exception as pickling_error:
-            raise TypeError(
-                f"policy_kwargs[{key!r}] (a {type(value).__name__}) cannot be saved: cloudpickle cannot pickle it "
-                f"({pickling_error}). Give an object that holds no locks, threads or open files (or define its "
-                "__getstate__); the file was not written."
-            ) from error
-
-
-def _check_model_file(path: Union[str, pathlib.Path, io.BufferedIOBase]) -> Tuple[Any, Dict[str, Any]]:
-    """
-    Refuses what :meth:`MPAIL.load` cannot load, naming the file and what is wrong with it.
-
-    :param path: the model file (``.zip`` may be left out, as Stable-Baselines3 allows) or a file object
-    :return: what to load: the file (``path``, else ``<path>.zip``, also where ``path`` is a directory) or the file
-        object, and the model's settings (its ``data`` member)
-    :raises FileNotFoundError: there is no such file
-    :raises ValueError: the file is empty, truncated, damaged, not a zip archive or a directory, its settings are not
-        JSON, or it is not an MPAIL model
-    """
-    if isinstance(path, io.BufferedIOBase):
-        name, source, start = getattr(path, "name", "<file object>"), path, path.tell()
-    else:
-        given = pathlib.Path(path)
-        with_zip = given.with_name(given.name + ".zip")
-        name = source = next((file for file in (given, with_zip) if file.is_file()), None)
-        if source is None and given.is_dir():
-            raise ValueError(f"MPAIL model file {given} is a directory, not a model file (and there is no {with_zip}).")
-        if source is None:
-            raise FileNotFoundError(f"MPAIL model file {given} does not exist (nor {with_zip}).")
-        if source.stat().st_size == 0:
-            raise ValueError(f"MPAIL model file {source} is empty (0 bytes): it was not saved whole.")
-    try:
-        with zipfile.ZipFile(source) as archive:
-            members = archive.namelist()
-            damaged = archive.testzip()
-            settings = archive.read("data") if "data" in members and damaged is None else None
-    except (zipfile.BadZipFile, EOFError, OSError, ValueError) as error:
-        raise ValueError(f"MPAIL model file {name} is truncated or not a zip archive ({error}).") from error
-    finally:
-        if isinstance(path, io.BufferedIOBase):
-            path.seek(start)
-    if damaged is not None:
-        raise ValueError(f"MPAIL model file {name} is damaged: its member {damaged} fails its CRC check (corrupted data).")
-    try:
-        data = None if settings is None else json.loads(settings)
-    except ValueError as error:  # not JSON, or not text
-        raise ValueError(
-            f"MPAIL model file {name}: its 'data' member (the model's settings) is not JSON ({error}): the file was not "
-            "written by MPAIL.save, or was changed since."
-        ) from error
-    if data is None or "policy.pth" not in members:
-        raise ValueError(
-            f"MPAIL model file {name} is truncated or not saved by Stable-Baselines3: it lacks the 'data' or 'policy.pth' "
-            f"member (it holds {members})."
-        )
-    missing = [setting for setting in MPAIL_SETTINGS if setting not in data]
-    if missing:
-        policy_module = data.get("policy_class", {}).get("__module__", "an unknown module")
-        raise ValueError(
-            f"Model file {name} is not an MPAIL model: it lacks MPAIL's settings {missing}, and its policy class comes from "
-            f"{policy_module}. Load it with the algorithm that saved it."
-        )
-    return source, data
