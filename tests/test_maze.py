@@ -103,3 +103,22 @@ def test_shipped_maze_demos_reach_the_goal_without_touching_the_walls():
     load_demos(demos, gym.make(POINT_MAZE_ID).observation_space)
     stats = shipped_demo_info("pointmaze")
     assert stats["expert_success_rate"] == 1.0 and stats["expert_return_mean"] > 3 * stats["random_return_mean"]
+
+
+def test_the_point_maze_walls_cost_is_paid_in_wall_cells_and_near_them_not_in_the_corridors():
+    skip_without_point_maze()
+    from sb3_mpail.envs.maze import U_MAZE_FIXED_START_GOAL
+    from sb3_mpail.mppi.constraints import make_constraint_cost, maze_walls
+
+    walls = make_constraint_cost("point_maze_walls", state_dim=6)
+    assert walls.centres.shape == (sum(row.count(1) for row in U_MAZE_FIXED_START_GOAL), 2)
+    # cell (row, column) centres are x = column - 2, y = 2 - row (1 m cells, the maze centred on the origin)
+    free = th.tensor([[-1.0, -1.0], [1.0, -1.0], [1.0, 0.0], [1.0, 1.0], [-1.0, 1.0], [0.0, 1.0]])
+    inner_wall, near_inner_wall = th.tensor([[-1.0, 0.0], [0.0, 0.0]]), th.tensor([[-1.0, -0.45], [0.0, 0.45]])
+    states = th.zeros(len(free) + 4, 6)
+    states[:, :2] = th.cat((free, inner_wall, near_inner_wall))
+    costs = walls(states)
+    assert (costs[: len(free)] == 0).all()  # every corridor cell's centre is free
+    assert (costs[len(free):] > 0).all()  # in the inner wall, and within the ball's 0.1 m radius of it
+    with pytest.raises(ValueError, match="maze_walls needs a gymnasium-robotics maze env"):
+        maze_walls(gym.make("Pendulum-v1"))

@@ -136,8 +136,52 @@ def parking_walls(margin: float = 1.0, weight: float = 100.0) -> RectangleObstac
     return walls
 
 
+def maze_walls(env: Any, margin: float = 0.1, weight: float = 100.0, x_index: int = 0,
+               y_index: int = 1) -> RectangleObstacles:  # fmt: skip
+    """
+    The wall cells of a gymnasium-robotics maze env (PointMaze, AntMaze: anything whose unwrapped env has a ``maze``)
+    as :class:`RectangleObstacles`, in metres.
+
+    :param env: a gymnasium-robotics maze env (wrappers are looked through)
+    :param margin: how far around each wall the cost reaches, in metres (PointMaze's ball radius: 0.1 m)
+    :param weight: the cost at the edge
+    :param x_index: the state dimension of the position's x
+    :param y_index: the state dimension of the position's y
+    """
+    maze = getattr(env.unwrapped, "maze", None)
+    if maze is None or not hasattr(maze, "cell_rowcol_to_xy"):
+        raise ValueError(f"maze_walls needs a gymnasium-robotics maze env (one whose unwrapped env has a maze); got {env}.")
+    cells = [(row, column) for row, cells in enumerate(maze.maze_map) for column, cell in enumerate(cells) if cell == 1]
+    half_size = maze.maze_size_scaling / 2
+    return RectangleObstacles(
+        centres=[maze.cell_rowcol_to_xy(np.array(cell)) for cell in cells] or np.zeros((0, 2)),
+        half_sizes=[(half_size, half_size)] * len(cells) or np.zeros((0, 2)),
+        margin=margin,
+        weight=weight,
+        x_index=x_index,
+        y_index=y_index,
+    )
+
+
+def point_maze_walls(margin: float = 0.1, weight: float = 100.0) -> RectangleObstacles:
+    """
+    ``sb3_mpail/PointMaze-v0``'s walls (:func:`maze_walls` of the U-maze; needs the ``scenarios`` extra).
+
+    :param margin: how far around each wall the cost reaches, in metres (the ball's radius: 0.1 m)
+    :param weight: the cost at the edge
+    """
+    import gymnasium as gym
+
+    import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/PointMaze-v0)
+
+    env = gym.make("sb3_mpail/PointMaze-v0")
+    walls = maze_walls(env, margin=margin, weight=weight)
+    env.close()
+    return walls
+
+
 #: constraint costs by the name a ``constraint_cost`` setting (a YAML file's, say) can give
-CONSTRAINT_COSTS: Dict[str, Callable[[], nn.Module]] = {"parking_walls": parking_walls}
+CONSTRAINT_COSTS: Dict[str, Callable[[], nn.Module]] = {"parking_walls": parking_walls, "point_maze_walls": point_maze_walls}
 
 
 def make_constraint_cost(
