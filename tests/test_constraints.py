@@ -104,6 +104,25 @@ def test_a_constraint_cost_is_saved_with_the_model_and_one_of_the_wrong_shape_is
         wrong.predict(obs, deterministic=True)
 
 
+def test_parking_walls_leave_every_slot_free_and_keep_a_car_at_any_heading_off_them():
+    pytest.importorskip("highway_env", reason="parking needs highway-env (the scenarios extra)")
+    import gymnasium as gym
+
+    from sb3_mpail.mppi.constraints import parking_walls
+
+    env = gym.make("sb3_mpail/Parking-v0")
+    env.reset(seed=0)
+    lanes = env.unwrapped.road.network.lanes_list()
+    slots = th.zeros(len(lanes), 12)
+    slots[:, :2] = th.tensor(np.array([lane.position(lane.length / 2, 0) for lane in lanes]) / 100, dtype=th.float32)
+    walls = parking_walls()
+    assert len(lanes) == 28 and (walls(slots) == 0).all()
+    # a car whose corner (2.5 m along, 1 m across from its centre) touches the right wall's face (x = 34.5 m) pays
+    corner_on_wall = th.zeros(1, 12)
+    corner_on_wall[0, 0] = (34.5 - np.hypot(2.5, 1.0) + 0.05) / 100
+    assert walls(corner_on_wall).item() > 0
+
+
 def test_parking_walls_are_named_for_a_yaml_file_and_an_unknown_name_is_refused():
     pytest.importorskip("highway_env", reason="parking needs highway-env (the scenarios extra)")
     from sb3_mpail.mppi.constraints import make_constraint_cost
