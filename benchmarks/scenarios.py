@@ -29,7 +29,7 @@ import math
 import time
 from functools import partial
 from pathlib import Path
-from typing import Callable, Dict, List, NamedTuple, Tuple
+from typing import Callable, Dict, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 import torch as th
@@ -279,7 +279,7 @@ def zoo_hyperparameters(env_id: str) -> Dict:
     return entry
 
 
-def run_seed(name: str, stats: Dict, seed: int, runs_dir: Path = RUNS_DIR) -> Dict:
+def run_seed(name: str, stats: Dict, seed: int, runs_dir: Optional[Path] = RUNS_DIR) -> Dict:
     """
     Trains and evaluates one seed of a scenario, or reads its stored figures if this seed already ran with the entry's
     current hyperparameters and evaluation episodes (an interrupted run goes on from the seeds it finished).
@@ -287,13 +287,13 @@ def run_seed(name: str, stats: Dict, seed: int, runs_dir: Path = RUNS_DIR) -> Di
     :param name: the scenario's key in :data:`SCENARIOS`
     :param stats: the shipped demos' information
     :param seed: the seed
-    :param runs_dir: where each seed's figures are stored
+    :param runs_dir: where each seed's figures are stored; ``None``: neither read nor stored
     """
     scenario = SCENARIOS[name]
     hyperparameters = zoo_hyperparameters(scenario.env_id)
     settings = {"hyperparameters": repr(hyperparameters), "n_eval_episodes": scenario.n_eval_episodes}
-    path = Path(runs_dir) / f"{name}_seed{seed}.json"
-    if path.exists():
+    path = None if runs_dir is None else Path(runs_dir) / f"{name}_seed{seed}.json"
+    if path is not None and path.exists():
         stored = json.loads(path.read_text())
         if stored["settings"] == settings:
             return stored["run"]
@@ -303,8 +303,9 @@ def run_seed(name: str, stats: Dict, seed: int, runs_dir: Path = RUNS_DIR) -> Di
     model.learn(timesteps)
     seconds = time.time() - start
     run = {"seed": seed, **scenario.figures(model, stats, scenario.n_eval_episodes), "seconds": seconds}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"settings": settings, "run": run}, indent=2) + "\n")
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"settings": settings, "run": run}, indent=2) + "\n")
     return run
 
 
@@ -378,7 +379,7 @@ def main() -> None:
     stats = shipped_demo_info(scenario.demos)
     runs: List[Dict] = []
     for seed in args.seeds:
-        runs.append(run_seed(args.scenario, stats, seed))
+        runs.append(run_seed(args.scenario, stats, seed, None if args.no_write else RUNS_DIR))
         print(runs[-1], flush=True)
     hyperparameters = zoo_hyperparameters(scenario.env_id)
     result = {

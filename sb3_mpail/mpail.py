@@ -50,7 +50,6 @@ from sb3_mpail.policies import NON_FINITE_OBSERVATION, MlpMPPI, MPPIPolicy
 from sb3_mpail.prior import PRIOR_TERMINATIONS, PriorReplay
 
 SelfMPAIL = TypeVar("SelfMPAIL", bound="MPAIL")
-#: settings every MPAIL model file holds and other algorithms' files do not
 #: constructor settings that Stable-Baselines3's ``load`` must set under another attribute name
 _SETTING_ATTRIBUTES = {"temperature": "temperature_mode", "stats_window_size": "_stats_window_size"}
 
@@ -428,6 +427,9 @@ class MPAIL(BaseAlgorithm):
             )
         settings = cls._load_settings(kwargs)
         model = super().load(source, env, device, custom_objects, print_system_info, force_reset, **settings)
+        if "prior_use_terminations" in data and "prior_terminations" not in data:  # a file saved before its rename
+            model.prior_terminations = "cut" if data["prior_use_terminations"] else "bootstrap"
+            del model.prior_use_terminations
         model._check_settings()
         return model
 

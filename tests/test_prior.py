@@ -114,6 +114,26 @@ def test_the_priors_targets_cut_bootstrap_or_repeat_the_terminal_reward_at_termi
     assert th.allclose(prior.seen["rewards"], expected)
 
 
+@pytest.mark.parametrize("used, meant", [(True, "cut"), (False, "bootstrap")])
+def test_a_model_saved_with_the_former_boolean_termination_setting_loads_with_what_it_meant(demos, tmp_path, used, meant):
+    import json
+    import zipfile
+
+    saved, former = tmp_path / "saved.zip", tmp_path / "former.zip"
+    prior_model(demos, prior_terminations="absorbing").save(saved)
+    with zipfile.ZipFile(saved) as archive, zipfile.ZipFile(former, "w") as rewritten:
+        for member in archive.namelist():
+            content = archive.read(member)
+            if member == "data":
+                data = json.loads(content)
+                del data["prior_terminations"]
+                data["prior_use_terminations"] = used
+                content = json.dumps(data).encode()
+            rewritten.writestr(member, content)
+    loaded = MPAIL.load(former)
+    assert loaded.prior_terminations == meant and not hasattr(loaded, "prior_use_terminations")
+
+
 @pytest.mark.parametrize(
     "policy_kwargs, settings, named",
     [
