@@ -4,12 +4,13 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from gymnasium import spaces
 from imitation.data.types import Trajectory
 from stable_baselines3.common.env_util import make_vec_env
 from torch import nn
 
 from sb3_mpail import MPAIL
-from sb3_mpail.mppi import AngleFeatures
+from sb3_mpail.mppi import AngleFeatures, GoalFrameFeatures
 from sb3_mpail.mppi.costs import FeatureMap
 from sb3_mpail.mppi.fused import Workspace
 
@@ -178,3 +179,40 @@ def test_a_dict_of_angles_names_angle_features_as_a_yaml_file_can():
     assert isinstance(features, AngleFeatures) and features.angle_indices == [5]
     with pytest.raises(ValueError, match="one key, 'angles'"):
         FeatureMap.wrap({"angle": [5]})
+
+
+#: parking's state: ego [x, y, vx, vy, cos h, sin h], then the goal's
+PARKING_GOAL_FRAME = dict(position=[0, 1], velocity=[2, 3], heading=[4, 5], goal_position=[6, 7], goal_heading=[10, 11])
+
+
+def parking_state(x, y, vx, vy, heading, goal_x, goal_y, goal_heading):
+    return [x, y, vx, vy, np.cos(heading), np.sin(heading), goal_x, goal_y, 0.0, 0.0, np.cos(goal_heading),
+            np.sin(goal_heading)]  # fmt: skip
+
+
+def test_goal_frame_features_are_the_same_for_the_same_approach_to_any_goal():
+    features = FeatureMap.wrap({"goal_frame": dict(PARKING_GOAL_FRAME, position_scale=10.0)})
+    assert isinstance(features, GoalFrameFeatures)
+    # 2 m short of a goal facing +y, moving towards it at 1 unit, heading 0.1 rad left of the goal's
+    towards_north = parking_state(3.0, 8.0, 0.0, 1.0, np.pi / 2 + 0.1, 3.0, 10.0, np.pi / 2)
+    # the same approach to a goal facing -x elsewhere
+    towards_west = parking_state(-3.0, -1.0, -1.0, 0.0, np.pi + 0.1, -5.0, -1.0, np.pi)
+    mapped = features(th.tensor([towards_north, towards_west], dtype=th.float32))
+    expected = [-20.0, 0.0, 1.0, 0.0, np.cos(0.1), np.sin(0.1)]  # along, across (x 10), velocity, relative heading
+    assert th.allclose(mapped, th.tensor([expected, expected], dtype=th.float32), atol=1e-5)
+    without_velocity = GoalFrameFeatures(**{k: v for k, v in PARKING_GOAL_FRAME.items() if k != "velocity"})
+    assert without_velocity(th.tensor([towards_north], dtype=th.float32)).shape == (1, 4)
+
+
+@pytest.mark.parametrize(
+    "settings, message",
+    [
+        (dict(PARKING_GOAL_FRAME, position=[0]), r"two state indices for each of \['position'\]"),
+        (dict(PARKING_GOAL_FRAME, position_scale=0), r"position_scale'\] must be a number > 0"),
+        (dict(PARKING_GOAL_FRAME, goal_heading=[10, 12]), r"goal_frame'\]\['goal_heading'\] holds state indices \[12\]"),
+    ],
+)
+def test_bad_goal_frame_settings_are_refused_naming_them(settings, message):
+    with pytest.raises(ValueError, match=message):
+        features = FeatureMap.wrap({"goal_frame": settings}, "discriminator_features")
+        FeatureMap.space(features, spaces.Box(-1, 1, (12,)), "discriminator_features")

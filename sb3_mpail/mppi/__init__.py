@@ -3,6 +3,7 @@
 from sb3_mpail.mppi.costs import (
     AngleFeatures,
     ConcaveValue,
+    GoalFrameFeatures,
     TerminalValue,
     TransitionCost,
     make_transition_discriminator,
@@ -27,6 +28,7 @@ from sb3_mpail.mppi.sampling import ActionSampler, DeltaSampler, GaussianSampler
 
 __all__ = [
     "AngleFeatures",
+    "GoalFrameFeatures",
     "DEFAULT_DYNAMICS",
     "DYNAMICS_MODELS",
     "CallableDynamics",

@@ -7,7 +7,7 @@ is the learned ``V_phi``, so both are thin views of networks the algorithm train
 
 import math
 import numbers
-from typing import Any, Callable, List, Mapping, Optional, Sequence, Union
+from typing import Any, Callable, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import torch as th
@@ -206,6 +206,72 @@ class AngleFeatures(nn.Module):
         return th.cat([*columns, states[:, previous:]], dim=1)
 
 
+class GoalFrameFeatures(nn.Module):
+    """
+    A goal-conditioned vehicle's state seen from its goal: the position and velocity in the goal's frame (along and
+    across the goal's heading) and the heading relative to the goal's, as cosine and sine. Demos that end at different
+    goals (parking slots) then all look alike, and a discriminator learns one approach rather than one per goal.
+
+    :param position: the state indices of the position ``(x, y)``
+    :param heading: the indices of the heading's ``(cos, sin)``
+    :param goal_position: the indices of the goal's position
+    :param goal_heading: the indices of the goal heading's ``(cos, sin)``
+    :param velocity: the indices of the velocity ``(vx, vy)`` (in the world frame); ``None``: no velocity features
+    :param position_scale: factor on the position features (e.g. 10 where a 5 m offset is 0.05 state units: a
+        spectral-normed discriminator's slope bound otherwise lets it barely tell such offsets apart)
+    :param name: the setting it was given as, which error messages name
+    """
+
+    def __init__(
+        self,
+        position: Sequence[int],
+        heading: Sequence[int],
+        goal_position: Sequence[int],
+        goal_heading: Sequence[int],
+        velocity: Sequence[int] | None = None,
+        position_scale: float = 1.0,
+        name: str = "goal_frame",
+    ):
+        super().__init__()
+        pairs = dict(position=position, heading=heading, goal_position=goal_position, goal_heading=goal_heading)
+        if velocity is not None:
+            pairs["velocity"] = velocity
+        self.indices = {key: _state_indices(value, f"{name}['{key}']") for key, value in pairs.items()}
+        wrong = {key: value for key, value in self.indices.items() if len(value) != 2}
+        if wrong:
+            raise ValueError(f"{name} takes two state indices for each of {sorted(wrong)}; got {wrong}.")
+        if not (isinstance(position_scale, numbers.Real) and position_scale > 0):
+            raise ValueError(f"{name}['position_scale'] must be a number > 0; got {position_scale!r}.")
+        self.position_scale, self.name = float(position_scale), name
+
+    def check_state_dim(self, state_dim: int, name: str) -> None:
+        """
+        Refuses indices out of range for ``state_dim``-D states (negative ones count from the end).
+
+        :param state_dim: size of a state
+        :param name: the setting the map was given as (the message names the map's own ``name``, which says more)
+        """
+        for key, indices in self.indices.items():
+            _check_index_range(indices, -state_dim, state_dim, f"{self.name}['{key}']")
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        def pair(key: str) -> Tuple[th.Tensor, th.Tensor]:
+            first, second = self.indices[key]
+            return states[:, first], states[:, second]
+
+        (x, y), (goal_x, goal_y) = pair("position"), pair("goal_position")
+        (cos, sin), (goal_cos, goal_sin) = pair("heading"), pair("goal_heading")
+
+        def in_goal_frame(dx: th.Tensor, dy: th.Tensor) -> List[th.Tensor]:
+            return [dx * goal_cos + dy * goal_sin, dy * goal_cos - dx * goal_sin]
+
+        columns = [self.position_scale * column for column in in_goal_frame(x - goal_x, y - goal_y)]
+        if "velocity" in self.indices:
+            columns += in_goal_frame(*pair("velocity"))
+        columns += [cos * goal_cos + sin * goal_sin, sin * goal_cos - cos * goal_sin]
+        return th.stack(columns, dim=1)
+
+
 class FeatureMap(nn.Module):
     """
     A fixed map from ``(batch, state_dim)`` states to ``(batch, n_features)`` discriminator features.
@@ -221,7 +287,8 @@ class FeatureMap(nn.Module):
     def wrap(cls, features: FeatureSpec, name: str = "discriminator_features") -> nn.Module:
         """
         The module itself, a :class:`FeatureSelection` of state indices, :class:`AngleFeatures` for ``{"angles":
-        [indices]}`` (a form a YAML hyperparameter file can hold), or a function wrapped in a :class:`FeatureMap`.
+        [indices]}``, :class:`GoalFrameFeatures` for ``{"goal_frame": {its settings}}`` (forms a YAML hyperparameter
+        file can hold), or a function wrapped in a :class:`FeatureMap`.
 
         :param features: the feature map as given
         :param name: the setting it was given as (``discriminator_features`` or ``value_features``), which error
@@ -230,9 +297,14 @@ class FeatureMap(nn.Module):
         if isinstance(features, nn.Module):
             return features
         if isinstance(features, Mapping):
-            if set(features) != {"angles"}:
-                raise ValueError(f"A dict of {name} takes one key, 'angles'; got {dict(features)}.")
-            return AngleFeatures(features["angles"], f"{name}['angles']")
+            if set(features) == {"angles"}:
+                return AngleFeatures(features["angles"], f"{name}['angles']")
+            if set(features) == {"goal_frame"} and isinstance(features["goal_frame"], Mapping):
+                return GoalFrameFeatures(**features["goal_frame"], name=f"{name}['goal_frame']")
+            raise ValueError(
+                f"A dict of {name} takes one key, 'angles' (a list of indices) or 'goal_frame' (a dict of "
+                f"GoalFrameFeatures' settings); got {dict(features)}."
+            )
         if isinstance(features, Sequence) and not isinstance(features, str):
             return FeatureSelection(features, name)
         if not callable(features):
@@ -257,7 +329,7 @@ class FeatureMap(nn.Module):
             messages name
         """
         state_dim = observation_space.shape[0]
-        if isinstance(features, (FeatureSelection, AngleFeatures)):
+        if isinstance(features, (FeatureSelection, AngleFeatures, GoalFrameFeatures)):
             features.check_state_dim(state_dim, name)
         states = th.zeros((2, *observation_space.shape))
         with th.no_grad():
