@@ -132,7 +132,8 @@ def run_variant(
     env_id: str, name: str, seed: int, timesteps: Optional[int], n_eval_episodes: int, out_dir: Path, command: str
 ) -> Path:
     """
-    Trains one variant on one seed, evaluates it and writes its result (skipped when the file exists).
+    Trains one variant on one seed, evaluates it and writes its result and the trained model beside it (``.zip``; both
+    skipped when the result exists).
 
     :param command: the command line that asked for it, quoted by the report
 
@@ -150,6 +151,7 @@ def run_variant(
     started = time.perf_counter()
     model.learn(budget, callback=curve)
     train_seconds = time.perf_counter() - started
+    model.save(path.with_suffix(".zip"))  # beside the result, for evaluations to come (not committed: *.zip is ignored)
     figures = evaluate_locomotion(model, env_id, n_eval_episodes, EVAL_SEED + seed, n_envs=n_eval_episodes)
     reference = shipped_demo_info(settings["demos"].rsplit("_", 1)[0])
     result = dict(

