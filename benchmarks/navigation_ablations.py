@@ -16,6 +16,7 @@ Usage::
     python -m benchmarks.navigation_ablations --seeds 0 1 2 --workers 2          # every variant
     python -m benchmarks.navigation_ablations --variants defaults stopping-demos --seeds 0 1 2
     python -m benchmarks.navigation_ablations --report-only
+    python -m benchmarks.navigation_ablations --variants concave-value --reevaluate   # saved models, evaluated again
 """
 
 import argparse
@@ -44,6 +45,7 @@ from benchmarks.runner import (
     ood_record,
     true_reward_record,
 )
+from sb3_mpail import MPAIL
 from sb3_mpail.demos import shipped_demos
 from sb3_mpail.evaluation import evaluate_episodes, normalised_score
 from sb3_mpail.mppi import AngleFeatures
@@ -217,16 +219,40 @@ def run_variant(name: str, seed: int, results_dir: Path = RESULTS_DIR, models_di
     model.learn(variant.timesteps)
     train_seconds = time.perf_counter() - started
     model.save(Path(models_dir) / f"{name}_seed{seed}.zip")
-    in_distribution = evaluate_episodes(model, ENV_ID, N_ID_EPISODES, ID_SEED + seed, n_envs=10)
-    record = ood_record(ood_episodes(model, N_OOD_STARTS))
     result = dict(
         variant=name, seed=seed, question=variant.question, counts=variant.counts, demos=variant.demos,
         timesteps=variant.timesteps, n_envs=variant.n_envs, train_seconds=round(train_seconds, 1),
-        id_return=in_distribution.mean_return, machine=machine_description(),
-        id_score=normalised_score(in_distribution.mean_return, reference_of(variant.demos)), ood=record,
-        **ood_measures(record),
+        machine=machine_description(), **evaluation(model, variant, seed),
     )  # fmt: skip
     path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(result))
+    return path
+
+
+def evaluation(model: MPAIL, variant: Variant, seed: int) -> Dict[str, Any]:
+    """A trained model's figures: in distribution (return, score) and out of distribution (record and measures)."""
+    in_distribution = evaluate_episodes(model, ENV_ID, N_ID_EPISODES, ID_SEED + seed, n_envs=10)
+    record = ood_record(ood_episodes(model, N_OOD_STARTS))
+    return dict(
+        id_return=in_distribution.mean_return, ood=record, **ood_measures(record),
+        id_score=normalised_score(in_distribution.mean_return, reference_of(variant.demos)),
+    )  # fmt: skip
+
+
+def reevaluate_variant(name: str, seed: int, results_dir: Path = RESULTS_DIR, models_dir: Path = MODELS_DIR) -> Path:
+    """
+    Evaluates a stored run's saved model again and replaces the figures of its result (its training figures stay),
+    marking it ``reevaluated`` with the machine and the planner's deterministic noise of now.
+
+    :param name: a key of :data:`VARIANTS`
+    :param seed: training seed
+    :return: the result file
+    """
+    path, model_file = result_path(name, seed, results_dir), Path(models_dir) / f"{name}_seed{seed}.zip"
+    th.set_num_threads(1)
+    result = json.loads(path.read_text())
+    result.update(evaluation(MPAIL.load(model_file, device="cpu"), VARIANTS[name], seed))
+    result["reevaluated"] = dict(machine=machine_description(), deterministic_noise="fresh at every step")
     path.write_text(json.dumps(result))
     return path
 
@@ -279,7 +305,12 @@ def report(results_dir: Path, names: Sequence[str], command: str) -> str:
     if rows[False]:
         lines += ["", "Not trained as the paper trains (reported apart; these never count for the OOD target):", "",
                   *header, *rows[False]]  # fmt: skip
+    reevaluated = [f"`{run['variant']}` seed {run['seed']}" for run in every_run if "reevaluated" in run]
     lines += ["", f"Command: `{command}` on {machines_of(every_run)}."]
+    if reevaluated:
+        lines += ["", f"Evaluated again from their saved models (`--reevaluate`) with deterministic planning drawing fresh "
+                      f"noise at every step, after a version that drew the same noise at every step: {len(reevaluated)} "
+                      f"runs ({', '.join(reevaluated)})."]  # fmt: skip
     return "\n".join(lines)
 
 
@@ -290,8 +321,17 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=1, help="runs trained at once, one torch thread each")
     parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR)
     parser.add_argument("--report-only", action="store_true", help="only rewrite the section from stored results")
+    parser.add_argument("--reevaluate", action="store_true",
+                        help="evaluate the saved models of stored runs again (none is trained), then rewrite the section")
     args = parser.parse_args()
-    if not args.report_only:
+    if args.reevaluate:
+        jobs = [(name, seed) for name in args.variants for seed in args.seeds
+                if result_path(name, seed, args.results_dir).exists() and (MODELS_DIR / f"{name}_seed{seed}.zip").exists()]
+        print(f"{len(jobs)} runs to evaluate again", flush=True)
+        with ProcessPoolExecutor(max(1, args.workers), mp_context=multiprocessing.get_context("spawn")) as pool:
+            for future in [pool.submit(reevaluate_variant, name, seed, args.results_dir) for name, seed in jobs]:
+                print("wrote", future.result(), flush=True)
+    elif not args.report_only:
         jobs = [(name, seed) for name in args.variants for seed in args.seeds
                 if not result_path(name, seed, args.results_dir).exists()]  # fmt: skip
         print(f"{len(jobs)} runs to do", flush=True)

@@ -207,3 +207,20 @@ def test_a_scenario_seed_that_already_ran_with_the_same_settings_is_read_back_no
     (tmp_path / "cartpole_seed3.json").write_text(json.dumps(stored))
     scenarios.run_seed("cartpole", {}, 3, tmp_path)
     assert trained == [3, 3]
+
+
+def test_evaluating_a_navigation_ablation_again_replaces_its_figures_keeps_its_training_and_says_so(tmp_path, monkeypatch):
+    from benchmarks import navigation_ablations
+
+    stored = dict(variant="defaults", seed=1, train_seconds=12.5, id_score=0.1, reached_reachable=0.2, machine="A")
+    (tmp_path / "defaults_seed1.json").write_text(json.dumps(stored))
+    (tmp_path / "defaults_seed1.zip").write_text("a saved model")
+    loaded = []
+    monkeypatch.setattr(navigation_ablations.MPAIL, "load", lambda path, device: loaded.append(path) or "model")
+    monkeypatch.setattr(navigation_ablations, "evaluation",
+                        lambda model, variant, seed: dict(id_score=0.9, reached_reachable=0.6))  # fmt: skip
+    navigation_ablations.reevaluate_variant("defaults", 1, tmp_path, tmp_path)
+    result = json.loads((tmp_path / "defaults_seed1.json").read_text())
+    assert loaded == [tmp_path / "defaults_seed1.zip"]
+    assert (result["id_score"], result["reached_reachable"], result["train_seconds"]) == (0.9, 0.6, 12.5)
+    assert result["reevaluated"]["deterministic_noise"] == "fresh at every step"
