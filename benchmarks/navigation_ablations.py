@@ -31,7 +31,7 @@ from typing import Any, Callable, Dict, List, Sequence
 import numpy as np
 import torch as th
 
-from benchmarks.report import machine_description, machines_of, write_section
+from benchmarks.report import DETERMINISTIC_NOISE, machine_description, machines_of, write_section
 from benchmarks.runner import (
     CIRCLING_YAW_RATE,
     GOAL_RADIUS,
@@ -252,7 +252,7 @@ def reevaluate_variant(name: str, seed: int, results_dir: Path = RESULTS_DIR, mo
     th.set_num_threads(1)
     result = json.loads(path.read_text())
     result.update(evaluation(MPAIL.load(model_file, device="cpu"), VARIANTS[name], seed))
-    result["reevaluated"] = dict(machine=machine_description(), deterministic_noise="fresh at every step")
+    result["reevaluated"] = dict(machine=machine_description(), deterministic_noise=DETERMINISTIC_NOISE)
     path.write_text(json.dumps(result))
     return path
 

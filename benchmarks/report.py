@@ -11,6 +11,11 @@ import torch as th
 BENCHMARKS_FILE = Path(__file__).resolve().parent.parent / "BENCHMARKS.md"
 
 
+#: how the library's deterministic planning draws its samples, recorded beside the evaluations made with it: an earlier
+#: version drew the same samples at every step (a worse planner), and results that lack this record came from it
+DETERMINISTIC_NOISE = "fresh at every step"
+
+
 def machine_description() -> str:
     """One line naming the machine a figure was measured on."""
     cpu = platform.processor() or platform.machine()

@@ -32,7 +32,15 @@ import numpy as np
 import torch as th
 
 from benchmarks.baselines import ALGO_LABELS, ALGOS, ENV_NAMES, env_id_of, env_name_of, load_config, train_baseline
-from benchmarks.report import BENCHMARKS_FILE, format_ci, machine_description, machines_of, mean_ci, write_section
+from benchmarks.report import (
+    BENCHMARKS_FILE,
+    DETERMINISTIC_NOISE,
+    format_ci,
+    machine_description,
+    machines_of,
+    mean_ci,
+    write_section,
+)
 from benchmarks.scenarios import RESULTS as SCENARIO_RESULTS
 from benchmarks.scenarios import SCENARIOS, lap_figures
 from sb3_mpail.demos import list_shipped_demos, shipped_demo_info, shipped_demos
@@ -421,7 +429,8 @@ def true_reward_record(n_episodes: int, results_dir: Path = RESULTS_DIR) -> Dict
     :param results_dir: where the record is kept
     """
     path = Path(results_dir) / "navigation_true_reward" / f"{n_episodes}starts.json"
-    settings = dict(planner=repr(sorted(DEFAULT_POLICY_KWARGS.items())), ood_seed=OOD_SEED, value_slope=TRUE_VALUE_SLOPE)
+    settings = dict(planner=repr(sorted(DEFAULT_POLICY_KWARGS.items())), ood_seed=OOD_SEED, value_slope=TRUE_VALUE_SLOPE,
+                    deterministic_noise=DETERMINISTIC_NOISE)  # fmt: skip
     stored = json.loads(path.read_text()) if path.exists() else {}
     if stored.get("settings") == settings:
         return stored

@@ -49,6 +49,8 @@ from sb3_mpail.zoo import HYPERPARAMS
 RESULTS = Path(__file__).resolve().parent / "figures" / "scenarios.json"
 #: each finished seed's figures, so that an interrupted run goes on where it stopped
 RUNS_DIR = Path(__file__).resolve().parent / "results" / "scenarios"
+#: each seed's trained model (not committed)
+MODELS_DIR = Path(__file__).resolve().parent.parent / "runs" / "benchmarks" / "scenarios"
 #: how each scenario's settings were chosen, what failed and what is left: written by hand, appended to the section
 NOTES = Path(__file__).resolve().parent / "scenarios_notes.md"
 EVAL_SEED = 10_000
@@ -302,6 +304,8 @@ def run_seed(name: str, stats: Dict, seed: int, runs_dir: Optional[Path] = RUNS_
     start = time.time()
     model.learn(timesteps)
     seconds = time.time() - start
+    MODELS_DIR.mkdir(parents=True, exist_ok=True)
+    model.save(MODELS_DIR / f"{name}_seed{seed}.zip")  # for evaluations to come
     run = {"seed": seed, **scenario.figures(model, stats, scenario.n_eval_episodes), "seconds": seconds}
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -7,6 +7,7 @@ import pytest
 from test_baselines import tiny_configs
 
 from benchmarks import runner
+from benchmarks.report import DETERMINISTIC_NOISE
 from benchmarks.runner import TRUE_REWARD_LABEL, main, make_jobs, mean_ci, ood_measures, steps_summary
 from sb3_mpail.demos import shipped_demo_info
 from sb3_mpail.evaluation import normalised_score
@@ -195,13 +196,19 @@ def test_a_scenario_seed_that_already_ran_with_the_same_settings_is_read_back_no
         def learn(self, timesteps):
             return self
 
+        def save(self, path):
+            saved.append(path)
+
+    saved = []
     monkeypatch.setattr(scenarios, "MPAIL", CountingMPAIL)
+    monkeypatch.setattr(scenarios, "MODELS_DIR", tmp_path / "models")
     monkeypatch.setattr(scenarios, "make_vec_env", lambda *args, **kwargs: None)
     monkeypatch.setitem(scenarios.SCENARIOS, "cartpole", scenarios.SCENARIOS["cartpole"]._replace(
         figures=lambda model, stats, n_episodes: {"return": 1.0, "score": 0.5}))  # fmt: skip
     first = scenarios.run_seed("cartpole", {}, 3, tmp_path)
     again = scenarios.run_seed("cartpole", {}, 3, tmp_path)
     assert trained == [3] and again == first and first["score"] == 0.5
+    assert saved == [tmp_path / "models" / "cartpole_seed3.zip"]
     stored = json.loads((tmp_path / "cartpole_seed3.json").read_text())
     stored["settings"]["n_eval_episodes"] += 1  # the settings changed since: the seed runs again
     (tmp_path / "cartpole_seed3.json").write_text(json.dumps(stored))
@@ -223,4 +230,4 @@ def test_evaluating_a_navigation_ablation_again_replaces_its_figures_keeps_its_t
     result = json.loads((tmp_path / "defaults_seed1.json").read_text())
     assert loaded == [tmp_path / "defaults_seed1.zip"]
     assert (result["id_score"], result["reached_reachable"], result["train_seconds"]) == (0.9, 0.6, 12.5)
-    assert result["reevaluated"]["deterministic_noise"] == "fresh at every step"
+    assert result["reevaluated"]["deterministic_noise"] == DETERMINISTIC_NOISE
