@@ -309,8 +309,8 @@ def report(results_dir: Path, names: Sequence[str], command: str) -> str:
     lines += ["", f"Command: `{command}` on {machines_of(every_run)}."]
     if reevaluated:
         lines += ["", f"Evaluated again from their saved models (`--reevaluate`) with deterministic planning drawing fresh "
-                      f"noise at every step, after a version that drew the same noise at every step: {len(reevaluated)} "
-                      f"runs ({', '.join(reevaluated)})."]  # fmt: skip
+                      f"noise at every step, after a version that drew the same noise at every step: "
+                      f"{', '.join(reevaluated)}."]  # fmt: skip
     return "\n".join(lines)
 
 
