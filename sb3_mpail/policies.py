@@ -47,7 +47,7 @@ DETERMINISTIC_PLANNING_SEED = 1_000_003
 
 def deterministic_planning_seed(*inputs: np.ndarray | None) -> int:
     """
-    The seed of deterministic planning's noise for these inputs (``predict``'s observations, plans and episode starts):
+    The seed of deterministic planning's noise for these inputs (``predict``'s observations and the plans it starts from):
     the same inputs give the same seed, so the same action, and the next step's inputs another one. One seed for every
     step would draw the same samples at every step: a warm-started plan then moves by the same perturbations step after
     step, and their sample mean's bias builds up (a lap driven that way went 4.5 m off its path on average, against
@@ -459,7 +459,9 @@ class MPPIPolicy(BasePolicy):
             previous_plan = fresh if state is None else self._previous_plan(state, fresh)
             if episode_start is not None:
                 previous_plan = th.where(self._episode_starts(episode_start, n_envs, vectorized), fresh, previous_plan)
-            seed = deterministic_planning_seed(raw, state, episode_start) if deterministic else None
+            seed = None
+            if deterministic:
+                seed = deterministic_planning_seed(raw, self._plan_key(state, episode_start, tuple(fresh.shape)))
             actions, plan = self.act(observations, previous_plan, deterministic, seed)
         actions, plan = actions.cpu().numpy(), plan.cpu().numpy()
         self.check_plan(plan, "The plan made from a finite observation and state", observations, previous_plan)
@@ -482,6 +484,18 @@ class MPPIPolicy(BasePolicy):
         if not np.isfinite(plan).all():
             cause = self.planner.non_finite_cause(observations.float(), previous_plan)
             check_finite(plan, what, cause or NON_FINITE_PLAN)
+
+    @staticmethod
+    def _plan_key(state: np.ndarray | None, episode_start: np.ndarray | None, shape: Tuple[int, ...]) -> np.ndarray:
+        """
+        The plans ``predict`` starts from, on the host, for deterministic planning's seed: ``state`` with NaN (never a
+        plan's value: plans are checked finite) for every env that starts afresh, so a restarted plan keys the same as
+        none given. ``state`` and ``episode_start`` were checked already.
+        """
+        key = np.full(shape, np.nan, np.float32) if state is None else np.array(state, np.float32)
+        if episode_start is not None:
+            key[np.asarray(episode_start).astype(bool).reshape(shape[0])] = np.nan
+        return key
 
     def _previous_plan(self, state: np.ndarray, fresh: th.Tensor) -> th.Tensor:
         """``predict``'s ``state``, checked to be plans of the right shape and finite, as a tensor."""
