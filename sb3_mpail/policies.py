@@ -45,7 +45,7 @@ from sb3_mpail.prior import PolicyPrior, PriorValue
 DETERMINISTIC_PLANNING_SEED = 1_000_003
 
 
-def deterministic_planning_seed(*inputs: np.ndarray | None) -> int:
+def deterministic_planning_seed(*inputs: np.ndarray) -> int:
     """
     The seed of deterministic planning's noise for these inputs (``predict``'s observations and the plans it starts from):
     the same inputs give the same seed, so the same action, and the next step's inputs another one. One seed for every
@@ -53,15 +53,11 @@ def deterministic_planning_seed(*inputs: np.ndarray | None) -> int:
     step, and their sample mean's bias builds up (a lap driven that way went 4.5 m off its path on average, against
     0.45 m with fresh samples).
 
-    :param inputs: host arrays (``None`` for one not given), hashed as float32 values (bool for flags)
+    :param inputs: host arrays, hashed as float32 values
     """
     digest = hashlib.blake2b(DETERMINISTIC_PLANNING_SEED.to_bytes(8, "little"), digest_size=8)
     for array in inputs:
-        if array is None:
-            digest.update(b"none")
-            continue
-        array = np.asarray(array)
-        digest.update(np.ascontiguousarray(array, dtype=bool if array.dtype == bool else np.float32).tobytes())
+        digest.update(np.ascontiguousarray(array, dtype=np.float32).tobytes())
     return int.from_bytes(digest.digest(), "little") >> 1  # torch seeds are below 2**63
 #: what the errors on a non-finite observation and on a non-finite plan advise
 NON_FINITE_OBSERVATION = "the planner cannot plan from it. Check the environment (SB3's VecCheckNan wrapper finds the step)."
