@@ -37,7 +37,7 @@ import yaml
 from stable_baselines3.common.env_util import make_vec_env
 
 import sb3_mpail.envs  # noqa: F401  (registers the package's envs)
-from benchmarks.report import format_ci, machine_description, mean_ci, write_section
+from benchmarks.report import DETERMINISTIC_NOISE, format_ci, machine_description, mean_ci, write_section
 from sb3_mpail import MPAIL
 from sb3_mpail.demos import shipped_demo_info, shipped_demos
 from sb3_mpail.envs.ant import evaluate_ant
@@ -284,7 +284,8 @@ def zoo_hyperparameters(env_id: str) -> Dict:
 def run_seed(name: str, stats: Dict, seed: int, runs_dir: Optional[Path] = RUNS_DIR) -> Dict:
     """
     Trains and evaluates one seed of a scenario, or reads its stored figures if this seed already ran with the entry's
-    current hyperparameters and evaluation episodes (an interrupted run goes on from the seeds it finished).
+    current hyperparameters, evaluation episodes and deterministic planner (an interrupted run goes on from the seeds
+    it finished).
 
     :param name: the scenario's key in :data:`SCENARIOS`
     :param stats: the shipped demos' information
@@ -293,7 +294,11 @@ def run_seed(name: str, stats: Dict, seed: int, runs_dir: Optional[Path] = RUNS_
     """
     scenario = SCENARIOS[name]
     hyperparameters = zoo_hyperparameters(scenario.env_id)
-    settings = {"hyperparameters": repr(hyperparameters), "n_eval_episodes": scenario.n_eval_episodes}
+    settings = {
+        "hyperparameters": repr(hyperparameters),
+        "n_eval_episodes": scenario.n_eval_episodes,
+        "deterministic_noise": DETERMINISTIC_NOISE,  # an evaluation by another planner is not reused
+    }
     path = None if runs_dir is None else Path(runs_dir) / f"{name}_seed{seed}.json"
     if path is not None and path.exists():
         stored = json.loads(path.read_text())

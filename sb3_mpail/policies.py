@@ -102,7 +102,9 @@ class MPPIPolicy(BasePolicy):
     :param discriminator_disagreement: weight of the ensemble's standard deviation, ``>= 0``
     :param discriminator_features: what the discriminator sees of a state: a fixed map ``features(states) ->
         (batch, n_features)`` on ``(batch, state_dim)`` tensors (an ``nn.Module``, a picklable function, a list of
-        the state indices kept, or ``{"angles": [indices]}`` for :class:`~sb3_mpail.mppi.costs.AngleFeatures`),
+        the state indices kept, ``{"angles": [indices]}`` for :class:`~sb3_mpail.mppi.costs.AngleFeatures`,
+        ``{"goal_frame": {...}}`` for :class:`~sb3_mpail.mppi.costs.GoalFrameFeatures` or ``{"lane_frame": {...}}``
+        for :class:`~sb3_mpail.mppi.costs.LaneFrameFeatures`),
         applied to ``s`` and ``s'`` before the discriminator, which is built on ``n_features`` inputs. The planner and
         the dynamics still use the full state. ``None``: the full observation. Its parameters, if any, are saved
         but not trained. Functions are saved with cloudpickle (module-level functions by reference, so their

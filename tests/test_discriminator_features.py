@@ -10,8 +10,8 @@ from stable_baselines3.common.env_util import make_vec_env
 from torch import nn
 
 from sb3_mpail import MPAIL
-from sb3_mpail.mppi import AngleFeatures, GoalFrameFeatures
-from sb3_mpail.mppi.costs import FeatureMap
+from sb3_mpail.mppi import AngleFeatures, GoalFrameFeatures, LaneFrameFeatures
+from sb3_mpail.mppi.costs import FeatureMap, squared_segment_distances
 from sb3_mpail.mppi.fused import Workspace
 
 TINY_PLANNER = dict(n_samples=16, horizon=3, n_iterations=2)
@@ -216,3 +216,72 @@ def test_bad_goal_frame_settings_are_refused_naming_them(settings, message):
     with pytest.raises(ValueError, match=message):
         features = FeatureMap.wrap({"goal_frame": settings}, "discriminator_features")
         FeatureMap.space(features, spaces.Box(-1, 1, (12,)), "discriminator_features")
+
+
+def ring_road(radius: float = 10.0, lane_width: float = 0.5, n_points: int = 64):
+    """Two concentric lanes driven anticlockwise round (0, 0), and a straight one along y = 30: polylines."""
+    angles = np.linspace(0.0, 2 * np.pi, n_points)
+    ring = [np.stack((r * np.cos(angles), r * np.sin(angles)), axis=1) for r in (radius, radius + lane_width)]
+    return ring + [np.array([[-20.0, 30.0], [0.0, 30.0], [20.0, 30.0]])]
+
+
+def test_lane_frame_features_give_the_offset_and_heading_from_the_nearest_lane():
+    # two square lanes 0.5 apart driven anticlockwise round (0, 0), and a straight one along y = 30
+    squares = [np.array([[-r, -r], [r, -r], [r, r], [-r, r], [-r, -r]]) for r in (10.0, 10.5)]
+    road = squares + [np.array([[-20.0, 30.0], [0.0, 30.0], [20.0, 30.0]])]
+    settings = dict(centrelines=road, position=[0, 1], heading=[2, 3], lateral_scale=10.0, cell_size=0.25)
+    features = FeatureMap.wrap({"lane_frame": settings})
+    assert isinstance(features, LaneFrameFeatures)
+    states = th.tensor(
+        [
+            [5.0, 30.1, np.cos(0.2), np.sin(0.2)],  # 0.1 left of the straight lane, heading 0.2 rad left of it
+            [0.0, -10.05, 1.0, 0.0],  # 0.05 outside (right of) the inner lane at its bottom, heading along it
+            [0.0, 10.45, -1.0, 0.0],  # 0.05 inside (left of) the outer lane at its top, along it (anticlockwise)
+            [10.1, 3.0, np.cos(2.0), np.sin(2.0)],  # 0.1 right of the inner lane's right side, heading 2 rad
+        ],
+        dtype=th.float32,
+    )
+    expected = [[1.0, np.cos(0.2), np.sin(0.2)], [-0.5, 1.0, 0.0], [0.5, 1.0, 0.0], [-1.0, np.cos(2.0 - np.pi / 2),
+                np.sin(2.0 - np.pi / 2)]]  # fmt: skip
+    assert th.allclose(features(states), th.tensor(expected, dtype=th.float32), atol=1e-5)
+
+
+def test_lane_frame_grid_lookup_finds_the_nearest_segment_near_the_road_as_measuring_every_segment_does():
+    features = LaneFrameFeatures(ring_road(), position=[0, 1], heading=[2, 3])
+    generator = th.Generator().manual_seed(0)
+    positions = th.rand((20000, 2), generator=generator) * th.tensor([50.0, 60.0]) - th.tensor([25.0, 20.0])
+    headings = th.rand(20000, generator=generator) * 2 * np.pi
+    states = th.cat((positions, th.cos(headings)[:, None], th.sin(headings)[:, None]), dim=1)
+    segments = features.segment_starts, features.segment_directions, features.segment_lengths
+    squared_distances, nearest = squared_segment_distances(positions, *segments).min(dim=1)
+    direction, offset = features.segment_directions[nearest], positions - features.segment_starts[nearest]
+    lateral = th.sign(direction[:, 0] * offset[:, 1] - direction[:, 1] * offset[:, 0]) * squared_distances.sqrt()
+    near = squared_distances < 2.0**2  # four lane widths
+    assert near.sum() > 2000
+    assert th.allclose(features(states)[near, 0], lateral[near], atol=1e-5)
+
+
+@pytest.mark.parametrize(
+    "settings, message",
+    [
+        (dict(centrelines="nowhere"), r"names no known road: 'nowhere'"),
+        (dict(centrelines=[[[0.0, 0.0]]]), r"polylines of \(n_points >= 2, 2\) positions; got 1 lines, lines \[0\]"),
+        (dict(centrelines=[[[0.0, 0.0], [0.0, 0.0]]]), r"no point repeated consecutively"),
+        (dict(lateral_scale=-1), r"lateral_scale'\] must be a number > 0"),
+        (dict(cell_size=0), r"cell_size'\] must be a number > 0"),
+        (dict(heading=[4, 6]), r"lane_frame'\]\['heading'\] holds state indices \[6\]"),
+    ],
+)
+def test_bad_lane_frame_settings_are_refused_naming_them(settings, message):
+    settings = dict(dict(centrelines=ring_road(), position=[0, 1], heading=[4, 5]), **settings)
+    with pytest.raises(ValueError, match=message):
+        features = FeatureMap.wrap({"lane_frame": settings}, "discriminator_features")
+        FeatureMap.space(features, spaces.Box(-1, 1, (6,)), "discriminator_features")
+
+
+def test_racetrack_lanes_are_read_from_highway_env():
+    pytest.importorskip("highway_env", reason="the racetrack needs highway-env (the scenarios extra)")
+    features = LaneFrameFeatures("racetrack", position=[0, 1], heading=[4, 5], lateral_scale=10.0)
+    # racetrack-v0's first straight: lanes at y = 0 and 5 m from x = 42 m, driven towards +x; observation units of 10 m
+    states = th.tensor([[5.0, 0.02, 1.0, 0.0, 1.0, 0.0], [6.0, 0.45, 1.0, 0.0, 1.0, 0.0]])
+    assert th.allclose(features(states), th.tensor([[0.2, 1.0, 0.0], [-0.5, 1.0, 0.0]]), atol=1e-4)

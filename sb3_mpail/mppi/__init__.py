@@ -4,8 +4,10 @@ from sb3_mpail.mppi.costs import (
     AngleFeatures,
     ConcaveValue,
     GoalFrameFeatures,
+    LaneFrameFeatures,
     TerminalValue,
     TransitionCost,
+    highway_env_lane_centrelines,
     make_transition_discriminator,
     make_value_network,
 )
@@ -29,6 +31,7 @@ from sb3_mpail.mppi.sampling import ActionSampler, DeltaSampler, GaussianSampler
 __all__ = [
     "AngleFeatures",
     "GoalFrameFeatures",
+    "LaneFrameFeatures",
     "DEFAULT_DYNAMICS",
     "DYNAMICS_MODELS",
     "CallableDynamics",
@@ -49,6 +52,7 @@ __all__ = [
     "TerminalValue",
     "TransitionCost",
     "TransitionReplayBuffer",
+    "highway_env_lane_centrelines",
     "make_dynamics",
     "make_transition_discriminator",
     "make_value_network",

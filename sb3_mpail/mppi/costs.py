@@ -7,7 +7,7 @@ is the learned ``V_phi``, so both are thin views of networks the algorithm train
 
 import math
 import numbers
-from typing import Any, Callable, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import torch as th
@@ -206,7 +206,38 @@ class AngleFeatures(nn.Module):
         return th.cat([*columns, states[:, previous:]], dim=1)
 
 
-class GoalFrameFeatures(nn.Module):
+class IndexPairFeatures(nn.Module):
+    """
+    Base of the feature maps that read named pairs of state indices (a position, a heading's cosine and sine).
+
+    :param pairs: each pair's name and its two state indices
+    :param scales: each positive factor's name and value
+    :param name: the setting the map was given as, which error messages name
+    """
+
+    def __init__(self, pairs: Mapping[str, Sequence[int]], scales: Mapping[str, float], name: str):
+        super().__init__()
+        self.indices = {key: _state_indices(value, f"{name}['{key}']") for key, value in pairs.items()}
+        wrong = {key: value for key, value in self.indices.items() if len(value) != 2}
+        if wrong:
+            raise ValueError(f"{name} takes two state indices for each of {sorted(wrong)}; got {wrong}.")
+        for key, scale in scales.items():
+            if not (isinstance(scale, numbers.Real) and scale > 0):
+                raise ValueError(f"{name}['{key}'] must be a number > 0; got {scale!r}.")
+        self.name = name
+
+    def check_state_dim(self, state_dim: int, name: str) -> None:
+        """
+        Refuses indices out of range for ``state_dim``-D states (negative ones count from the end).
+
+        :param state_dim: size of a state
+        :param name: the setting the map was given as (the message names the map's own ``name``, which says more)
+        """
+        for key, indices in self.indices.items():
+            _check_index_range(indices, -state_dim, state_dim, f"{self.name}['{key}']")
+
+
+class GoalFrameFeatures(IndexPairFeatures):
     """
     A goal-conditioned vehicle's state seen from its goal: the position and velocity in the goal's frame (along and
     across the goal's heading) and the heading relative to the goal's, as cosine and sine. Demos that end at different
@@ -232,27 +263,11 @@ class GoalFrameFeatures(nn.Module):
         position_scale: float = 1.0,
         name: str = "goal_frame",
     ):
-        super().__init__()
         pairs = dict(position=position, heading=heading, goal_position=goal_position, goal_heading=goal_heading)
         if velocity is not None:
             pairs["velocity"] = velocity
-        self.indices = {key: _state_indices(value, f"{name}['{key}']") for key, value in pairs.items()}
-        wrong = {key: value for key, value in self.indices.items() if len(value) != 2}
-        if wrong:
-            raise ValueError(f"{name} takes two state indices for each of {sorted(wrong)}; got {wrong}.")
-        if not (isinstance(position_scale, numbers.Real) and position_scale > 0):
-            raise ValueError(f"{name}['position_scale'] must be a number > 0; got {position_scale!r}.")
-        self.position_scale, self.name = float(position_scale), name
-
-    def check_state_dim(self, state_dim: int, name: str) -> None:
-        """
-        Refuses indices out of range for ``state_dim``-D states (negative ones count from the end).
-
-        :param state_dim: size of a state
-        :param name: the setting the map was given as (the message names the map's own ``name``, which says more)
-        """
-        for key, indices in self.indices.items():
-            _check_index_range(indices, -state_dim, state_dim, f"{self.name}['{key}']")
+        super().__init__(pairs, dict(position_scale=position_scale), name)
+        self.position_scale = float(position_scale)
 
     def forward(self, states: th.Tensor) -> th.Tensor:
         def pair(key: str) -> Tuple[th.Tensor, th.Tensor]:
@@ -272,6 +287,158 @@ class GoalFrameFeatures(nn.Module):
         return th.stack(columns, dim=1)
 
 
+#: segments a :class:`LaneFrameFeatures` grid cell keeps: more than can be nearest to a point near the racetrack's lanes (13)
+MAX_CANDIDATE_SEGMENTS = 16
+
+
+def squared_segment_distances(positions: th.Tensor, starts: th.Tensor, directions: th.Tensor, lengths: th.Tensor) -> th.Tensor:
+    """
+    Each position's squared distance to each of ``n`` segments, ``(batch, n)``: the same segments for every position
+    (``starts`` and ``directions`` ``(n, 2)``, ``lengths`` ``(n,)``) or each position's own (``(batch, n, 2)`` and
+    ``(batch, n)``).
+
+    :param positions: ``(batch, 2)``
+    :param starts: the segments' starts
+    :param directions: their unit directions
+    :param lengths: their lengths
+    """
+    offsets = positions.unsqueeze(1) - starts
+    along = th.minimum((offsets * directions).sum(dim=-1).clamp(min=0), lengths)  # the projection onto the segment
+    residuals = offsets - along.unsqueeze(-1) * directions  # not |offset|^2 - along^2, which cancels in float32
+    return (residuals * residuals).sum(dim=-1)
+
+
+class LaneFrameFeatures(IndexPairFeatures):
+    """
+    A vehicle's state seen from the road: its signed lateral offset from the nearest lane's centre line and its heading
+    relative to that lane's direction, as cosine and sine. Every stretch of the road then looks alike, so a
+    discriminator learns "keep to the centre of a lane, along it" once, rather than where on the map the demos drove
+    (from absolute positions it learns the latter, and cuts the curves it extrapolates across).
+
+    The centre lines are polylines. The planner maps about ``10^4`` states per call, too many to measure against every
+    segment, so a grid over the road holds, per cell, every segment that can be nearest to a point in it (measured
+    once, at most :data:`MAX_CANDIDATE_SEGMENTS`); a state is measured against its cell's only. That is exact wherever no
+    more segments can be nearest, which holds near the road (on the racetrack, within 10 m of a lane's centre); farther
+    out, and beyond the grid (which reaches a tenth of the road's extent past it, its edge cells serving beyond),
+    a state may be measured from a segment a little farther than the nearest: it is off the road either way.
+
+    :param centrelines: each lane's centre line in the driving direction, ``(n_points, 2)`` positions in the state's
+        units (at least two points each); or the name of a road of :data:`NAMED_LANES`
+    :param position: the state indices of the position ``(x, y)``
+    :param heading: the indices of the heading's ``(cos, sin)``
+    :param lateral_scale: factor on the lateral offset (e.g. 10 where a state unit is 10 m, so that the feature is in
+        metres: a spectral-normed discriminator's slope bound otherwise lets it barely tell a lane's centre from its edge)
+    :param cell_size: the lookup grid's cell, in the state's units; ``None``: half the median segment's length
+    :param name: the setting it was given as, which error messages name
+    """
+
+    def __init__(
+        self,
+        centrelines: Union[str, Sequence[Any]],
+        position: Sequence[int],
+        heading: Sequence[int],
+        lateral_scale: float = 1.0,
+        cell_size: Optional[float] = None,
+        name: str = "lane_frame",
+    ):
+        super().__init__(dict(position=position, heading=heading), dict(lateral_scale=lateral_scale), name)
+        if isinstance(centrelines, str):
+            if centrelines not in NAMED_LANES:
+                raise ValueError(f"{name}['centrelines'] names no known road: {centrelines!r} is not one of "
+                                 f"{sorted(NAMED_LANES)}.")  # fmt: skip
+            centrelines = NAMED_LANES[centrelines]()
+        lines = [np.asarray(line, dtype=np.float32) for line in centrelines]
+        wrong = [index for index, line in enumerate(lines) if line.ndim != 2 or line.shape[1] != 2 or len(line) < 2]
+        if not lines or wrong:
+            raise ValueError(f"{name}['centrelines'] must be polylines of (n_points >= 2, 2) positions; got {len(lines)} "
+                             f"lines, lines {wrong} of another shape.")  # fmt: skip
+        starts = np.concatenate([line[:-1] for line in lines])
+        steps = np.concatenate([np.diff(line, axis=0) for line in lines])
+        lengths = np.linalg.norm(steps, axis=1)
+        if not (np.isfinite(starts).all() and (lengths > 0).all()):
+            raise ValueError(f"{name}['centrelines'] must hold finite positions with no point repeated consecutively.")
+        cell_size = float(np.median(lengths) / 2) if cell_size is None else cell_size
+        if not (isinstance(cell_size, numbers.Real) and cell_size > 0):
+            raise ValueError(f"{name}['cell_size'] must be a number > 0 or None; got {cell_size!r}.")
+        self.register_buffer("segment_starts", th.as_tensor(starts))
+        self.register_buffer("segment_directions", th.as_tensor(steps / lengths[:, None]))
+        self.register_buffer("segment_lengths", th.as_tensor(lengths))
+        self.lateral_scale, self.cell_size = float(lateral_scale), float(cell_size)
+        # the grid reaches a tenth of the road's extent beyond it; derived from the segments, so not saved
+        points = np.concatenate(lines)
+        margin = 0.1 * (points.max(axis=0) - points.min(axis=0)).max()
+        origin = points.min(axis=0) - margin
+        n_x, n_y = np.ceil((points.max(axis=0) + margin - origin) / self.cell_size).astype(int) + 1
+        centres = th.as_tensor(origin + self.cell_size * (np.stack(np.meshgrid(np.arange(n_x), np.arange(n_y)), -1) + 0.5))
+        segments = self.segment_starts, self.segment_directions, self.segment_lengths
+        distances = [squared_segment_distances(chunk.float(), *segments) for chunk in centres.reshape(-1, 2).split(4096)]
+        # a segment can be nearest to a point of a cell only if it lies within the nearest's distance to the cell's
+        # centre plus the cell's diagonal (the triangle inequality, twice): each cell keeps those, up to a cap
+        diagonal = self.cell_size * math.sqrt(2)
+        windows = [(chunk.min(dim=1, keepdim=True).values.sqrt() + diagonal) ** 2 for chunk in distances]
+        most = max(int((chunk <= window).sum(dim=1).max()) for chunk, window in zip(distances, windows))
+        n_candidates = min(MAX_CANDIDATE_SEGMENTS, most)
+        candidates = th.cat([chunk.topk(n_candidates, largest=False).indices for chunk in distances])
+        self.register_buffer("grid_origin", th.as_tensor(origin, dtype=th.float32), persistent=False)
+        self.register_buffer("grid_candidates", candidates.reshape(int(n_y), int(n_x), n_candidates), persistent=False)
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        positions, (cos, sin) = states[:, self.indices["position"]], states[:, self.indices["heading"]].unbind(dim=1)
+        n_y, n_x, _ = self.grid_candidates.shape
+        cells = ((positions - self.grid_origin) / self.cell_size).long()
+        candidates = self.grid_candidates[cells[:, 1].clamp(0, n_y - 1), cells[:, 0].clamp(0, n_x - 1)]  # (batch, k)
+        segments = self.segment_starts[candidates], self.segment_directions[candidates], self.segment_lengths[candidates]
+        squared_distance, nearest = squared_segment_distances(positions, *segments).min(dim=1)
+        nearest = candidates.gather(1, nearest.unsqueeze(1)).squeeze(1)
+        direction, offset = self.segment_directions[nearest], positions - self.segment_starts[nearest]
+        # the distance to the centre line, on the left of the lane's direction > 0 (round a bend's outside, segments
+        # equally near agree on it, where the distances to their lines would differ)
+        side = th.sign(direction[:, 0] * offset[:, 1] - direction[:, 1] * offset[:, 0])
+        lateral = side * squared_distance.sqrt()
+        relative_cos = cos * direction[:, 0] + sin * direction[:, 1]
+        relative_sin = sin * direction[:, 0] - cos * direction[:, 1]
+        return th.stack((self.lateral_scale * lateral, relative_cos, relative_sin), dim=1)
+
+
+def highway_env_lane_centrelines(env: Any, position_scale: float = 1.0, spacing: float = 2.0) -> List[np.ndarray]:
+    """
+    Every lane's centre line of a highway-env road (its ``road.network``), sampled every ``spacing`` metres and at its
+    end, divided by ``position_scale`` (the observation's units).
+
+    :param env: a highway-env env, or one that holds it as ``road_env`` (wrappers are looked through)
+    :param position_scale: metres per state unit of the position
+    :param spacing: metres between samples along a lane
+    """
+    road_env = getattr(env.unwrapped, "road_env", env.unwrapped)
+    road = getattr(road_env, "road", None)
+    if road is None:
+        raise ValueError(f"highway_env_lane_centrelines needs a highway-env env with a road (reset it first); got {env}.")
+    lines = []
+    for ends in road.network.graph.values():
+        for lanes in ends.values():
+            for lane in lanes:
+                longitudinal = np.append(np.arange(0.0, lane.length, spacing), lane.length)
+                lines.append(np.array([lane.position(s, 0.0) for s in longitudinal]) / position_scale)
+    return lines
+
+
+def racetrack_lanes() -> List[np.ndarray]:
+    """``sb3_mpail/Racetrack-v0``'s lane centre lines in its observation's units (needs the ``scenarios`` extra)."""
+    import gymnasium as gym
+
+    import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Racetrack-v0)
+
+    env = gym.make("sb3_mpail/Racetrack-v0")
+    env.reset(seed=0)
+    lines = highway_env_lane_centrelines(env, position_scale=10.0)
+    env.close()
+    return lines
+
+
+#: roads by the name a ``lane_frame`` setting's ``centrelines`` (a YAML file's, say) can give
+NAMED_LANES: Dict[str, Callable[[], List[np.ndarray]]] = {"racetrack": racetrack_lanes}
+
+
 class FeatureMap(nn.Module):
     """
     A fixed map from ``(batch, state_dim)`` states to ``(batch, n_features)`` discriminator features.
@@ -287,8 +454,9 @@ class FeatureMap(nn.Module):
     def wrap(cls, features: FeatureSpec, name: str = "discriminator_features") -> nn.Module:
         """
         The module itself, a :class:`FeatureSelection` of state indices, :class:`AngleFeatures` for ``{"angles":
-        [indices]}``, :class:`GoalFrameFeatures` for ``{"goal_frame": {its settings}}`` (forms a YAML hyperparameter
-        file can hold), or a function wrapped in a :class:`FeatureMap`.
+        [indices]}``, :class:`GoalFrameFeatures` for ``{"goal_frame": {its settings}}``, :class:`LaneFrameFeatures` for
+        ``{"lane_frame": {its settings}}`` (forms a YAML hyperparameter file can hold), or a function wrapped in a
+        :class:`FeatureMap`.
 
         :param features: the feature map as given
         :param name: the setting it was given as (``discriminator_features`` or ``value_features``), which error
@@ -301,9 +469,11 @@ class FeatureMap(nn.Module):
                 return AngleFeatures(features["angles"], f"{name}['angles']")
             if set(features) == {"goal_frame"} and isinstance(features["goal_frame"], Mapping):
                 return GoalFrameFeatures(**features["goal_frame"], name=f"{name}['goal_frame']")
+            if set(features) == {"lane_frame"} and isinstance(features["lane_frame"], Mapping):
+                return LaneFrameFeatures(**features["lane_frame"], name=f"{name}['lane_frame']")
             raise ValueError(
-                f"A dict of {name} takes one key, 'angles' (a list of indices) or 'goal_frame' (a dict of "
-                f"GoalFrameFeatures' settings); got {dict(features)}."
+                f"A dict of {name} takes one key, 'angles' (a list of indices), 'goal_frame' (a dict of "
+                f"GoalFrameFeatures' settings) or 'lane_frame' (LaneFrameFeatures'); got {dict(features)}."
             )
         if isinstance(features, Sequence) and not isinstance(features, str):
             return FeatureSelection(features, name)
@@ -329,7 +499,7 @@ class FeatureMap(nn.Module):
             messages name
         """
         state_dim = observation_space.shape[0]
-        if isinstance(features, (FeatureSelection, AngleFeatures, GoalFrameFeatures)):
+        if isinstance(features, (FeatureSelection, AngleFeatures, IndexPairFeatures)):
             features.check_state_dim(state_dim, name)
         states = th.zeros((2, *observation_space.shape))
         with th.no_grad():
