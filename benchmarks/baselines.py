@@ -7,8 +7,9 @@ built on the ``imitation`` library and Stable-Baselines3:
   transitions (``dynamics="learned"``), no prior model: as much information as GAIL has.
 * ``gail``: imitation's GAIL, PPO generator, state-only discriminator ``d(s, s')`` (MPAIL's discriminator,
   :func:`~sb3_mpail.mppi.costs.make_transition_discriminator`; dummy zero actions in the demos, never read). With
-  ``reward_net_kwargs`` ``features=[...]`` it sees only those state dimensions (:class:`FeatureSelectingRewardNet`),
-  and ``demos_are_features: True`` reads demos that hold only them (the lap's).
+  ``reward_net_kwargs`` ``features`` it sees only those features of the state, in any form MPAIL's
+  ``discriminator_features`` takes (:class:`FeatureMappedRewardNet`), and ``demos_are_features: True`` reads demos
+  that hold only the state dimensions ``features`` lists (the lap's).
 * ``airl``: **AIRL (obs-only)**. imitation's AIRL subtracts ``log pi(a_expert | s)`` from its logit, meaningless
   without expert actions, so this is imitation's adversarial trainer with AIRL's shaped state-only reward
   ``f(s, s') = g(s) + gamma h(s') - h(s)`` (``BasicShapedRewardNet``) as the logit, no policy term, PPO generator.
@@ -55,7 +56,7 @@ import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
 from sb3_mpail.demos import DemoSource, list_shipped_demos, load_demos, shipped_demos
 from sb3_mpail.envs import cartpole
 from sb3_mpail.envs.locomotion import LOCOMOTION_TASKS
-from sb3_mpail.mppi.costs import FeatureSelection, make_transition_discriminator
+from sb3_mpail.mppi.costs import FeatureMap, FeatureSpec, make_transition_discriminator
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, PendulumDynamics
 
 #: every algorithm's rl_zoo3-style hyperparameter file; MPAIL's is the package's own (``sb3_mpail.zoo.HYPERPARAMS``,
@@ -306,14 +307,15 @@ class ObsOnlyAIRL(AdversarialTrainer):
         return self._reward_net.base
 
 
-class FeatureSelectingRewardNet(RewardNet):
+class FeatureMappedRewardNet(RewardNet):
     """
-    A reward net that reads only some dimensions of ``s`` and ``s'``: MPAIL's ``discriminator_features=[...]`` for
-    GAIL. Its discriminator is :func:`~sb3_mpail.mppi.costs.make_transition_discriminator` built on those dimensions.
+    A reward net that reads chosen features of ``s`` and ``s'``: MPAIL's ``discriminator_features`` for GAIL (state
+    indices, ``{"lane_frame": ...}`` and the other forms :meth:`~sb3_mpail.mppi.costs.FeatureMap.wrap` takes). Its
+    discriminator is :func:`~sb3_mpail.mppi.costs.make_transition_discriminator` built on those features.
 
     :param observation_space: the env's observation space
     :param action_space: the env's action space (never read)
-    :param feature_indices: the state dimensions the discriminator sees, in this order
+    :param features: what the discriminator sees of a state
     :param hid_sizes: hidden widths
     :param use_spectral_norm: spectral normalisation on every linear layer
     """
@@ -322,13 +324,13 @@ class FeatureSelectingRewardNet(RewardNet):
         self,
         observation_space: spaces.Box,
         action_space: spaces.Box,
-        feature_indices: Sequence[int],
+        features: FeatureSpec,
         hid_sizes: Sequence[int] = (32, 32),
         use_spectral_norm: bool = True,
     ):
         super().__init__(observation_space, action_space)
-        self.features = FeatureSelection(feature_indices)
-        feature_space = spaces.Box(-np.inf, np.inf, (len(feature_indices),), np.float32)
+        self.features = FeatureMap.wrap(features, "reward_net_kwargs features")
+        feature_space = FeatureMap.space(self.features, observation_space, "reward_net_kwargs features")
         self.discriminator = make_transition_discriminator(feature_space, action_space, hid_sizes, use_spectral_norm)
 
     def forward(self, state: th.Tensor, action: th.Tensor, next_state: th.Tensor, done: th.Tensor) -> th.Tensor:
@@ -339,18 +341,18 @@ def make_gail_discriminator(
     observation_space: spaces.Box, action_space: spaces.Box, net_kwargs: Optional[Dict[str, Any]] = None
 ) -> RewardNet:
     """
-    GAIL's state-only discriminator ``d(s, s')``, on every state dimension or, with ``features``, on those only.
+    GAIL's state-only discriminator ``d(s, s')``, on the whole state or, with ``features``, on those features.
 
     :param observation_space: the env's observation space
     :param action_space: the env's action space (never read)
     :param net_kwargs: ``reward_net_kwargs``: ``hid_sizes`` (default ``(32, 32)``), ``spectral_norm`` (default on),
-        ``features`` (state indices; default all)
+        ``features`` (MPAIL's ``discriminator_features`` forms; default the whole state)
     """
     net_kwargs = net_kwargs or {}
     hid_sizes, use_spectral_norm = net_kwargs.get("hid_sizes", (32, 32)), net_kwargs.get("spectral_norm", True)
     if net_kwargs.get("features") is None:
         return make_transition_discriminator(observation_space, action_space, hid_sizes, use_spectral_norm)
-    return FeatureSelectingRewardNet(observation_space, action_space, net_kwargs["features"], hid_sizes, use_spectral_norm)
+    return FeatureMappedRewardNet(observation_space, action_space, net_kwargs["features"], hid_sizes, use_spectral_norm)
 
 
 def make_adversarial(algo: str, env: VecEnv, demos: DemoSource, seed: int, hyperparams: Dict[str, Any]) -> AdversarialTrainer:
@@ -366,9 +368,11 @@ def make_adversarial(algo: str, env: VecEnv, demos: DemoSource, seed: int, hyper
     net_kwargs = dict(hyperparams.get("reward_net_kwargs") or {})
     if net_kwargs.get("features") is not None and algo != "gail":
         raise ValueError("Only GAIL's discriminator can read a subset of the state (reward_net_kwargs features).")
-    if hyperparams.get("demos_are_features") and net_kwargs.get("features") is None:
-        raise ValueError("demos_are_features needs reward_net_kwargs features: the state dimensions the demos hold.")
-    demo_features = net_kwargs["features"] if hyperparams.get("demos_are_features") else None
+    features = net_kwargs.get("features")
+    if hyperparams.get("demos_are_features") and not (isinstance(features, Sequence) and not isinstance(features, str)):
+        raise ValueError("demos_are_features needs reward_net_kwargs features to list the state dimensions the demos hold; "
+                         f"got {features!r}.")  # fmt: skip
+    demo_features = features if hyperparams.get("demos_are_features") else None
     transitions = observation_only_transitions(demos, env, demo_features)
     ppo_kwargs = {key: value for key, value in hyperparams.items() if key not in ADVERSARIAL_KEYS}
     generator = PPO(ppo_kwargs.pop("policy", "MlpPolicy"), env, seed=seed, device="cpu", verbose=0, **ppo_kwargs)

@@ -11,7 +11,7 @@ from benchmarks.baselines import (
     ACTION_DEMO_DIR,
     ALGOS,
     META_KEYS,
-    FeatureSelectingRewardNet,
+    FeatureMappedRewardNet,
     action_demos_path,
     action_transitions,
     cartpole_actions,
@@ -29,7 +29,7 @@ from sb3_mpail.mppi.dynamics import PendulumDynamics
 from sb3_mpail.zoo import HYPERPARAMS
 
 ENVS = ("Pendulum-v1", "sb3_mpail/Navigation-v0")
-CARTPOLE, LAP = "sb3_mpail/ContinuousCartPole-v0", "sb3_mpail/NavigationLap-v0"
+CARTPOLE, LAP, RACETRACK = "sb3_mpail/ContinuousCartPole-v0", "sb3_mpail/NavigationLap-v0", "sb3_mpail/Racetrack-v0"
 #: per algorithm, overrides that shrink a real config entry to one round of a few dozen env steps
 TINY = {
     "mpail": dict(n_envs=2, n_steps=16, policy_kwargs="dict(n_samples=16, horizon=3, n_iterations=1)"),
@@ -183,21 +183,20 @@ def test_mpail_s_last_evaluation_sees_the_model_after_its_last_update(tmp_path):
     assert all(th.equal(evaluated, final) for evaluated, final in zip(evaluated_values[-1], final_values))
 
 
-@pytest.mark.parametrize("algo, env_id", [("gail", CARTPOLE), ("airl", CARTPOLE), ("gail", LAP)])
-def test_cartpole_and_lap_baselines_have_mpail_s_budget_and_demos(algo, env_id):
+@pytest.mark.parametrize("algo, env_id", [("gail", CARTPOLE), ("airl", CARTPOLE), ("gail", LAP), ("gail", RACETRACK)])
+def test_scenario_baselines_have_mpail_s_budget_demos_and_discriminator_features(algo, env_id):
     entry, mpail = load_config(algo, env_id), load_config("mpail", env_id)
     assert entry["n_timesteps"] == mpail["n_timesteps"] and entry["demos"] == mpail["demos"]
     assert entry.get("demos_are_features", False) == mpail.get("demos_are_features", False)
-    if entry.get("demos_are_features"):  # the discriminator sees what MPAIL's sees
-        assert entry["reward_net_kwargs"]["features"] == mpail["policy_kwargs"]["discriminator_features"]
+    assert entry["reward_net_kwargs"].get("features") == mpail["policy_kwargs"].get("discriminator_features")
 
 
-def test_feature_selecting_discriminator_reads_only_its_features():
+def test_feature_mapped_discriminator_reads_only_its_features():
     from gymnasium import spaces
 
     observation_space = spaces.Box(-np.inf, np.inf, (12,), np.float32)
     # eval mode: in training mode every call takes a power-iteration step of the spectral norm
-    net = FeatureSelectingRewardNet(observation_space, spaces.Box(-1, 1, (2,)), [0, 1, 6, 7]).eval()
+    net = FeatureMappedRewardNet(observation_space, spaces.Box(-1, 1, (2,)), [0, 1, 6, 7]).eval()
     states, next_states = th.randn(5, 12), th.randn(5, 12)
     logits = net(states, None, next_states, None)
     others = [index for index in range(12) if index not in (0, 1, 6, 7)]
