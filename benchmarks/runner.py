@@ -42,7 +42,7 @@ from benchmarks.report import (
     write_section,
 )
 from benchmarks.scenarios import RESULTS as SCENARIO_RESULTS
-from benchmarks.scenarios import SCENARIOS, lap_figures
+from benchmarks.scenarios import SCENARIOS, Scenario, lap_figures, zoo_hyperparameters
 from sb3_mpail.demos import list_shipped_demos, shipped_demo_info, shipped_demos
 from sb3_mpail.envs.navigation import DT, MAX_SPEED, REWARD_OFFSET
 from sb3_mpail.evaluation import Episodes, evaluate_episodes, normalised_score
@@ -214,6 +214,9 @@ def train_job(job: Dict[str, Any], options: Dict[str, Any]) -> Dict[Path, Dict[s
                           steps_to_target=next((point[0] for point in curves[name] if point[1] >= TARGET), None))  # fmt: skip
         if env_id == NAVIGATION and options["ood_episodes"] > 0:
             result["ood"] = ood_record(ood_episodes(finals[name], options["ood_episodes"]))
+        scenario = scenario_of(env_id)
+        if scenario is not None and env_id != LAP:  # the lap's curve points are its figures already
+            result["scenario_figures"] = scenario[1].figures(finals[name], stats, scenario[1].n_eval_episodes)
         results[path] = result
     return results
 
@@ -496,9 +499,49 @@ def ood_table(
     return "\n".join(lines)
 
 
-def scenario_mpail_lap() -> Optional[Dict[str, Any]]:
-    """MPAIL's lap runs from ``benchmarks/scenarios.py`` (its ``scenarios.json`` entry), or ``None`` if not run."""
-    return json.loads(SCENARIO_RESULTS.read_text()).get("lap") if SCENARIO_RESULTS.exists() else None
+def scenario_of(env_id: str) -> Optional[Tuple[str, Scenario]]:
+    """The name and :class:`~benchmarks.scenarios.Scenario` of ``benchmarks/scenarios.py`` that trains on ``env_id``."""
+    return next(((name, scenario) for name, scenario in SCENARIOS.items() if scenario.env_id == env_id), None)
+
+
+def stored_scenario_runs(name: str) -> Optional[Dict[str, Any]]:
+    """MPAIL's runs of a scenario from ``benchmarks/scenarios.py`` (its ``scenarios.json`` entry), or ``None``."""
+    return json.loads(SCENARIO_RESULTS.read_text()).get(name) if SCENARIO_RESULTS.exists() else None
+
+
+def scenario_table(results: List[Dict[str, Any]], name: str, scenario: Scenario, algos: Sequence[str],
+                   demos: Sequence[int], n_seeds: int, scenario_mpail: bool = True) -> str:  # fmt: skip
+    """
+    A scenario's own figures (success and crashes, share of steps on the road, ...) per algorithm and demo count, as
+    ``benchmarks/scenarios.py`` measures MPAIL's, mean ± 95% CI over seeds.
+
+    :param results: :func:`load_results` of the grid
+    :param name: the scenario's key in :data:`~benchmarks.scenarios.SCENARIOS`
+    :param scenario: the scenario
+    :param algos: rows
+    :param demos: demo counts
+    :param n_seeds: seeds asked for (rows with fewer are marked incomplete)
+    :param scenario_mpail: when the grid has no MPAIL runs, add MPAIL's from ``benchmarks/scenarios.py`` (the zoo
+        entry's budget); so not for grids with ``--timesteps``
+    """
+    titles = " | ".join(title for _, title in scenario.columns)
+    lines = [f"| algorithm | demos | seeds | {titles} | source |", "|---|---|---|" + "---|" * len(scenario.columns) + "---|"]
+    rows = []
+    for algo in algos:
+        for n_demos in demos:
+            runs = [r["scenario_figures"] for r in results if r["algo"] == algo and r["n_demos"] == n_demos
+                    and "scenario_figures" in r]  # fmt: skip
+            done = f"{len(runs)}/{n_seeds}" + ("" if len(runs) >= n_seeds else " **incomplete**")
+            rows.append((ALGO_LABELS[algo], n_demos, done, runs, "this grid"))
+    stored = stored_scenario_runs(name) if scenario_mpail and not any(r["algo"] == "mpail" for r in results) else None
+    if stored is not None:
+        n_demos = int(zoo_hyperparameters(scenario.env_id)["demos"].rsplit("_", 1)[1])
+        rows.insert(0, (ALGO_LABELS["mpail"], n_demos, str(len(stored["runs"])), stored["runs"], f"`{stored['command']}`"))
+    for label, n_demos, done, runs, source in rows:
+        cells = [format_ci(*mean_ci([run[key] for run in runs]), digits=3) if runs else "not run"
+                 for key, _ in scenario.columns]  # fmt: skip
+        lines.append(f"| {label} | {n_demos} | {done} | {' | '.join(cells)} | {source} |")
+    return "\n".join(lines)
 
 
 def lap_table(
@@ -523,7 +566,7 @@ def lap_table(
             runs = sorted((r for r in results if r["algo"] == algo and r["n_demos"] == n_demos), key=lambda r: r["seed"])
             done = f"{len(runs)}/{n_seeds}" + ("" if len(runs) >= n_seeds else " **incomplete**")
             rows.append((ALGO_LABELS[algo], n_demos, done, [run["lap"] for run in runs], "this grid"))
-    scenario = scenario_mpail_lap() if scenario_mpail and not any(r["algo"] == "mpail" for r in results) else None
+    scenario = stored_scenario_runs("lap") if scenario_mpail and not any(r["algo"] == "mpail" for r in results) else None
     if scenario is not None:
         runs = sorted(scenario["runs"], key=lambda run: run["seed"])
         rows.insert(0, (ALGO_LABELS["mpail"], 1, str(len(runs)), runs, f"`{scenario['command']}`"))
@@ -604,7 +647,7 @@ def plot_lap_curves(results: List[Dict[str, Any]], path: Path, scenario_mpail: b
             curve = np.asarray(run["curve"], dtype=float)
             label = f"{ALGO_LABELS[algo]} ({len(runs)} seeds)" if run is runs[0] else None
             axis.plot(curve[:, 0], curve[:, 1], color=f"C{index}", marker="o", ms=3, label=label)
-    scenario = scenario_mpail_lap() if scenario_mpail and not any(r["algo"] == "mpail" for r in results) else None
+    scenario = stored_scenario_runs("lap") if scenario_mpail and not any(r["algo"] == "mpail" for r in results) else None
     if scenario is not None:
         for run in scenario["runs"]:
             label = f"{ALGO_LABELS['mpail']} after {scenario['timesteps']} steps ({len(scenario['runs'])} seeds, scenarios.py)"
@@ -744,6 +787,12 @@ def write_report(
             if mpail and gail:
                 lines.append(f"MPAIL vs GAIL, {n_demos} demos, env steps to 0.9: MPAIL {steps_summary(mpail)}, "
                              f"GAIL {steps_summary(gail)}.")  # fmt: skip
+        scenario = scenario_of(env_id)
+        if scenario is not None and any("scenario_figures" in r for r in results):
+            table = scenario_table(results, *scenario, grid_algos, grid_demos, grid_seeds, timesteps is None)
+            lines += [f"The scenario's own figures, measured as `benchmarks/scenarios.py` measures MPAIL's "
+                      f"({scenario[1].n_eval_episodes} episodes per seed); mean ± 95% CI over seeds:", "", table,
+                      ""]  # fmt: skip
         lines += [""] + [f"![{env_id}](benchmarks/figures/{figure.name})" for figure in figures if figure is not None]
         lines += ["", f"Command: `{command}` on {machines_of(results)}."]
         write_section(f"baselines-{name}", "\n".join(lines), report_file)

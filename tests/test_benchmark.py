@@ -231,3 +231,22 @@ def test_evaluating_a_navigation_ablation_again_replaces_its_figures_keeps_its_t
     assert loaded == [tmp_path / "defaults_seed1.zip"]
     assert (result["id_score"], result["reached_reachable"], result["train_seconds"]) == (0.9, 0.6, 12.5)
     assert result["reevaluated"]["deterministic_noise"] == DETERMINISTIC_NOISE
+
+
+def test_scenario_runs_record_the_scenario_s_own_figures_beside_mpail_s_scenario_runs(tmp_path, monkeypatch):
+    mpail_runs = [dict(seed=seed, on_road=1.0, score=0.9 + 0.1 * seed, speed=10.0, seconds=1.0, **{"return": 160.0})
+                  for seed in range(2)]  # fmt: skip
+    scenarios = tmp_path / "scenarios.json"
+    scenarios.write_text(json.dumps(dict(racetrack=dict(runs=mpail_runs, command="python -m benchmarks.scenarios racetrack"))))
+    monkeypatch.setattr(runner, "SCENARIO_RESULTS", scenarios)
+    results, report = tmp_path / "results", tmp_path / "BENCHMARKS.md"
+    main(["--envs", "racetrack", "--algos", "gail", "--demos", "4", "--seeds", "1", "--config-dir",
+          str(tiny_configs(tmp_path / "configs")), "--results-dir", str(results), "--report-file", str(report),
+          "--figures-dir", str(tmp_path / "figures"), "--eval-episodes", "1"])  # fmt: skip
+    gail = json.loads((results / "racetrack" / "gail_4demos_seed0.json").read_text())
+    assert set(gail["scenario_figures"]) == {"return", "score", "on_road", "speed"}
+    assert 0.0 <= gail["scenario_figures"]["on_road"] <= 1.0
+    text = report.read_text()
+    assert "| algorithm | demos | seeds | return | normalised score | share of steps on the road | source |" in text
+    assert "| MPAIL | 4 | 2 | 160.000 ± 0.000 | 0.950 ± 0.635 | 1.000 ± 0.000 | `python -m benchmarks.scenarios" in text
+    assert "| GAIL (state-only) | 4 | 1/1 |" in text
