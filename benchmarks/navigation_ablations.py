@@ -26,12 +26,12 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 import torch as th
 
-from benchmarks.report import DETERMINISTIC_NOISE, machine_description, machines_of, write_section
+from benchmarks.report import DETERMINISTIC_NOISE, SAME_NOISE, machine_description, machines_of, write_section
 from benchmarks.runner import (
     CIRCLING_YAW_RATE,
     GOAL_RADIUS,
@@ -222,7 +222,7 @@ def run_variant(name: str, seed: int, results_dir: Path = RESULTS_DIR, models_di
     result = dict(
         variant=name, seed=seed, question=variant.question, counts=variant.counts, demos=variant.demos,
         timesteps=variant.timesteps, n_envs=variant.n_envs, train_seconds=round(train_seconds, 1),
-        machine=machine_description(), **evaluation(model, variant, seed),
+        machine=machine_description(), deterministic_noise=DETERMINISTIC_NOISE, **evaluation(model, variant, seed),
     )  # fmt: skip
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(result))
@@ -257,6 +257,11 @@ def reevaluate_variant(name: str, seed: int, results_dir: Path = RESULTS_DIR, mo
     return path
 
 
+def evaluation_noise(run: Dict[str, Any]) -> Optional[str]:
+    """How the deterministic planning that scored a run drew its samples (``None``: not recorded, before the field)."""
+    return run["reevaluated"]["deterministic_noise"] if "reevaluated" in run else run.get("deterministic_noise")
+
+
 def report(results_dir: Path, names: Sequence[str], command: str) -> str:
     """
     The ``navigation-ablations`` section: per variant, means and 95% CIs over its seeds.
@@ -281,7 +286,9 @@ def report(results_dir: Path, names: Sequence[str], command: str) -> str:
         every_run += runs
         cells = [format_ci(*mean_ci([run[column] for run in runs])) for column in columns]
         variant = VARIANTS[name]
-        rows[variant.counts].append(f"| `{name}` | {variant.question} | {len(runs)} | " + " | ".join(cells) + " |")
+        same_noise = sum(evaluation_noise(run) == SAME_NOISE for run in runs)
+        seeds = f"{len(runs)}" + (f" ({same_noise} †)" if same_noise else "")
+        rows[variant.counts].append(f"| `{name}` | {variant.question} | {seeds} | " + " | ".join(cells) + " |")
     lines = [
         "## Navigation ablations: what makes the planner generalise",
         "",
@@ -307,6 +314,9 @@ def report(results_dir: Path, names: Sequence[str], command: str) -> str:
                   *header, *rows[False]]  # fmt: skip
     reevaluated = [f"`{run['variant']}` seed {run['seed']}" for run in every_run if "reevaluated" in run]
     lines += ["", f"Command: `{command}` on {machines_of(every_run)}."]
+    if any(evaluation_noise(run) == SAME_NOISE for run in every_run):
+        lines += ["", "†: runs evaluated by a version whose deterministic planning drew the same samples at every step "
+                      "(a worse planner); `--reevaluate` scores their saved models again."]  # fmt: skip
     if reevaluated:
         lines += ["", f"Evaluated again from their saved models (`--reevaluate`) with deterministic planning drawing fresh "
                       f"noise at every step, after a version that drew the same noise at every step: "

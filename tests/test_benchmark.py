@@ -7,7 +7,7 @@ import pytest
 from test_baselines import tiny_configs
 
 from benchmarks import runner
-from benchmarks.report import DETERMINISTIC_NOISE
+from benchmarks.report import DETERMINISTIC_NOISE, SAME_NOISE
 from benchmarks.runner import TRUE_REWARD_LABEL, main, make_jobs, mean_ci, ood_measures, steps_summary
 from sb3_mpail.demos import shipped_demo_info
 from sb3_mpail.evaluation import normalised_score
@@ -250,3 +250,21 @@ def test_scenario_runs_record_the_scenario_s_own_figures_beside_mpail_s_scenario
     assert "| algorithm | demos | seeds | return | normalised score | share of steps on the road | source |" in text
     assert "| MPAIL | 4 | 2 | 160.000 ± 0.000 | 0.950 ± 0.635 | 1.000 ± 0.000 | `python -m benchmarks.scenarios" in text
     assert "| GAIL (state-only) | 4 | 1/1 |" in text
+
+
+def test_a_navigation_ablation_scored_by_the_same_samples_planner_is_marked_until_evaluated_again(tmp_path, monkeypatch):
+    from benchmarks import navigation_ablations
+
+    figures = dict(id_score=0.9, reached_reachable=0.3, final_reward=7.0, progress=0.5, circling=0.2, machine="A")
+    for seed in range(2):
+        run = dict(figures, variant="concave-value", seed=seed, deterministic_noise=SAME_NOISE)
+        (tmp_path / f"concave-value_seed{seed}.json").write_text(json.dumps(run))
+    monkeypatch.setattr(navigation_ablations, "true_reward_record", lambda n_starts, results_dir: {})
+    monkeypatch.setattr(navigation_ablations, "ood_measures", lambda record: dict(figures, reached_reachable=0.95))
+    assert "| 2 (2 †) |" in navigation_ablations.report(tmp_path, ["concave-value"], "cmd")
+    monkeypatch.setattr(navigation_ablations.MPAIL, "load", lambda path, device: "model")
+    monkeypatch.setattr(navigation_ablations, "evaluation", lambda model, variant, seed: {})
+    (tmp_path / "concave-value_seed1.zip").write_text("a saved model")
+    navigation_ablations.reevaluate_variant("concave-value", 1, tmp_path, tmp_path)
+    text = navigation_ablations.report(tmp_path, ["concave-value"], "cmd")
+    assert "| 2 (1 †) |" in text and "†: runs evaluated by a version whose deterministic planning drew the same" in text
