@@ -297,3 +297,28 @@ def test_compiled_planner_matches_the_eager_one():
             raise
         pytest.skip(f"torch.compile does not work on this machine (no C++ toolchain?): {type(error).__name__}")
     assert_same_plans(optimised, reference)
+
+
+@pytest.mark.parametrize("features, chunk_rows", [(None, None), ({"angles": [5]}, None), (None, 700)])
+def test_discriminator_ensembles_plan_through_their_batched_view_and_match_the_reference(features, chunk_rows, monkeypatch):
+    from sb3_mpail.mppi import ensemble
+    from sb3_mpail.mppi.ensemble import FrozenEnsembleCost
+
+    if chunk_rows is not None:  # chunks of 350 rows, not whole time steps (192 rows each)
+        monkeypatch.setattr(ensemble, "chunk_rows", lambda: chunk_rows)
+    policy = make_policy(NAVIGATION, "bicycle", n_samples=64, discriminator_ensemble_size=3, discriminator_disagreement=1.5,
+                         discriminator_features=features)  # fmt: skip
+    with th.no_grad():
+        view = policy.planner.step_cost.planning_view(12)
+    assert isinstance(view.view if isinstance(view, MappedView) else view, FrozenEnsembleCost)
+    optimised, reference = plan_both_ways(policy, navigation_states(3))
+    assert_same_plans(optimised, reference)
+
+
+def test_ensembles_of_members_with_different_layers_plan_through_the_module_path():
+    from sb3_mpail.mppi.ensemble import FrozenEnsembleCost
+    from sb3_mpail.mppi.fused import freeze_mlp
+
+    members = [th.nn.Sequential(th.nn.Linear(24, width), th.nn.ReLU(), th.nn.Linear(width, 1)).eval() for width in (32, 16)]
+    assert FrozenEnsembleCost.build([freeze_mlp(member) for member in members], 12, 1.0) is None
+    assert FrozenEnsembleCost.build([freeze_mlp(members[0])] * 2, 12, 1.0) is not None

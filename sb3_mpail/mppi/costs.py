@@ -17,7 +17,8 @@ from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
 from torch.nn.utils.parametrizations import spectral_norm
 
-from sb3_mpail.mppi.fused import FusedTransitionCost, FusedValue, ViewCache, freeze_mlp, fused_mlp_ok
+from sb3_mpail.mppi.ensemble import DiscriminatorEnsemble, FrozenEnsembleCost, frozen_members
+from sb3_mpail.mppi.fused import FrozenMlp, FusedTransitionCost, FusedValue, ViewCache, freeze_mlp, fused_mlp_ok
 
 #: what a network sees of a state: a module, a function, state indices, or ``{"angles": [indices]}``
 FeatureSpec = Union[nn.Module, Callable[[th.Tensor], th.Tensor], Sequence[int], Mapping[str, Sequence[int]]]
@@ -615,27 +616,36 @@ class TransitionCost(nn.Module):
             states, next_states = self.features(states), self.features(next_states)
         return -self.discriminator(states, None, next_states, None).view(batch_shape)
 
-    def planning_view(self, state_dim: int) -> Optional[Union[FusedTransitionCost, MappedView]]:
+    def planning_view(self, state_dim: int) -> Optional[Union[FusedTransitionCost, FrozenEnsembleCost, MappedView]]:
         """
         The fused whole-horizon cost with the discriminator's weights frozen (until they change), behind the feature
-        map if there is one, or ``None`` where the module path must be used: gradients enabled, training mode
-        (spectral norm's power iteration then updates its vectors on every call), or a discriminator other than an MLP
-        on ``(s, s')``.
+        map if there is one (:class:`~sb3_mpail.mppi.ensemble.FrozenEnsembleCost` for an ensemble), or ``None`` where
+        the module path must be used: gradients enabled, training mode (spectral norm's power iteration then updates
+        its vectors on every call), or a discriminator other than MLPs on ``(s, s')``.
 
         :param state_dim: size of a state
         """
         net = self.discriminator
-        if th.is_grad_enabled() or net.training or not isinstance(net, BasicRewardNet):
+        if th.is_grad_enabled() or net.training:
             return None
-        if not (net.use_state and net.use_next_state) or net.use_action or net.use_done:
-            return None
+
+        def inputs(mlp: Optional[FrozenMlp]) -> int:  # what each state gives the first layer: the mapped features
+            return state_dim if self.features is None or mlp is None else mlp.weights[0].shape[0] // 2
+
+        def build_ensemble() -> Optional[FrozenEnsembleCost]:
+            members = frozen_members(net)
+            return FrozenEnsembleCost.build(members, inputs(members[0]), net.disagreement)
 
         def build() -> Optional[FusedTransitionCost]:
             mlp = freeze_mlp(net.mlp)
-            inputs = state_dim if self.features is None else (mlp.weights[0].shape[0] // 2 if mlp is not None else 0)
-            return FusedTransitionCost(mlp, inputs) if fused_mlp_ok(mlp, 2 * inputs) else None
+            return FusedTransitionCost(mlp, inputs(mlp)) if fused_mlp_ok(mlp, 2 * inputs(mlp)) else None
 
-        view = self._planning_views.get(net.mlp, state_dim, build)
+        if isinstance(net, DiscriminatorEnsemble):
+            view = self._planning_views.get(net, state_dim, build_ensemble)
+        elif isinstance(net, BasicRewardNet) and net.use_state and net.use_next_state and not (net.use_action or net.use_done):
+            view = self._planning_views.get(net.mlp, state_dim, build)
+        else:
+            return None
         return view if view is None or self.features is None else MappedView(view, self.features)
 
 

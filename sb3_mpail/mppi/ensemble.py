@@ -3,10 +3,12 @@ Discriminator ensembles: several logits ``d_k(s, s')`` whose disagreement marks 
 trained near, so that a planner can treat them as less expert-like than any single network's extrapolation says.
 """
 
-from typing import Sequence
+from typing import List, Optional, Sequence
 
 import torch as th
 from torch import nn
+
+from sb3_mpail.mppi.fused import FrozenMlp, Workspace, chunk_rows, freeze_mlp
 
 
 class DiscriminatorEnsemble(nn.Module):
@@ -45,3 +47,94 @@ def member_logits(discriminator: nn.Module, state: th.Tensor, next_state: th.Ten
     if isinstance(discriminator, DiscriminatorEnsemble):
         return discriminator.member_logits(state, next_state)
     return discriminator(state, None, next_state, None).unsqueeze(0)
+
+
+class FrozenEnsembleCost:
+    """
+    ``sum_t markups[t] * c(s_t, s_{t+1})`` for a whole rolled-out horizon, with ``c`` the negated logit of a
+    :class:`DiscriminatorEnsemble` of frozen MLPs of one architecture on ``[s, s']``: every layer is one batched
+    product over the members, the first split into its ``s`` and ``s'`` halves, instead of ``K`` module calls that
+    each concatenate ``[s, s']`` and re-normalise their weights.
+
+    :param mlps: the members, frozen
+    :param state_dim: size of a state (the first layers take ``2 * state_dim`` inputs)
+    :param disagreement: the ensemble's weight on the members' standard deviation
+    """
+
+    def __init__(self, mlps: Sequence[FrozenMlp], state_dim: int, disagreement: float):
+        first = th.stack([mlp.weights[0] for mlp in mlps])  # (K, 2 * state_dim, hidden)
+        self.state_weight, self.next_state_weight = first[:, :state_dim].contiguous(), first[:, state_dim:].contiguous()
+        self.first_bias = th.stack([mlp.biases[0] for mlp in mlps])[:, None]  # (K, 1, hidden)
+        self.first_activation = mlps[0].activations[0]
+        # (K, in, out) weights and (K, 1, out) biases of each hidden layer
+        self.hidden = [(th.stack([mlp.weights[layer] for mlp in mlps]), th.stack([mlp.biases[layer] for mlp in mlps])[:, None],
+                        mlps[0].activations[layer]) for layer in range(1, len(mlps[0].weights) - 1)]  # fmt: skip
+        self.output_weight = th.stack([mlp.weights[-1][:, 0] for mlp in mlps])[:, None]  # (K, 1, hidden)
+        self.output_bias = th.stack([mlp.biases[-1][0] for mlp in mlps])[:, None]  # (K, 1)
+        self.n_members, self.disagreement = len(mlps), disagreement
+
+    @staticmethod
+    def build(mlps: Sequence[Optional[FrozenMlp]], state_dim: int, disagreement: float) -> Optional["FrozenEnsembleCost"]:
+        """
+        The view, or ``None`` where the members are not MLPs of one architecture on ``2 * state_dim`` inputs with one
+        output and the same activations.
+        """
+        frozen = [mlp for mlp in mlps if mlp is not None]
+        if len(frozen) < len(mlps):
+            return None
+        shapes = {tuple(tuple(weight.shape) for weight in mlp.weights) for mlp in frozen}
+        activations = {tuple(activation and activation.onednn_name for activation in mlp.activations) for mlp in frozen}
+        if len(shapes) != 1 or len(activations) != 1:
+            return None
+        layers = next(iter(shapes))
+        if layers[0][0] != 2 * state_dim or layers[-1][1] != 1 or frozen[0].activations[-1] is not None:
+            return None
+        return FrozenEnsembleCost(frozen, state_dim, disagreement)
+
+    def hold(self, held_dims: Sequence[int], initial_states: th.Tensor) -> None:
+        """Held state dimensions are not exploited here (every input is multiplied)."""
+
+    def __call__(self, states: th.Tensor, markups: th.Tensor, workspace: Workspace) -> th.Tensor:
+        """
+        :param states: ``s_0 .. s_H``, ``(horizon + 1, n_envs, n_samples, state_dim)``
+        :param markups: ``eta^t`` per step, ``(horizon,)``
+        :param workspace: scratch tensors
+        :return: cost per sample, ``(n_envs, n_samples)``
+        """
+        n_states, n_envs, n_samples, state_dim = states.shape
+        rows = states[:-1].reshape(-1, state_dim), states[1:].reshape(-1, state_dim)
+        logits = workspace.get("ensemble_logits", (len(rows[0]),), states)
+        # chunks whose K activations stay in the CPU cache between layers (half of fused.chunk_rows(): timed faster
+        # than the whole batch or smaller chunks on AMD EPYC)
+        chunk = max(1, chunk_rows() // 2)
+        for start in range(0, len(logits), chunk):
+            logits[start : start + chunk] = self.logits(rows[0][start : start + chunk], rows[1][start : start + chunk])
+        return th.einsum("t,ten->en", -markups, logits.view(n_states - 1, n_envs, n_samples))
+
+    def logits(self, states: th.Tensor, next_states: th.Tensor) -> th.Tensor:
+        """The ensemble's logits on ``(rows, state_dim)`` transitions: the members' mean less their weighted spread."""
+        # (K, rows, hidden), contiguous for the batched products: W_s s + W_s' s' per member, no [s, s'] built
+        members = th.matmul(states, self.state_weight).add_(th.matmul(next_states, self.next_state_weight))
+        members.add_(self.first_bias)
+        if self.first_activation is not None:
+            self.first_activation.apply_(members)
+        for weight, bias, activation in self.hidden:
+            members = th.baddbmm(bias, members, weight)
+            if activation is not None:
+                activation.apply_(members)
+        member_logits = (members * self.output_weight).sum(dim=2) + self.output_bias  # (K, rows)
+        mean = member_logits.mean(dim=0)
+        # the spread as the module computes it (std, unbiased=False), in elementwise steps: std's reduction over the
+        # K rows of a (K, rows) tensor is far slower
+        spread = (member_logits - mean).square_().mean(dim=0).sqrt_()
+        return mean.sub_(spread, alpha=self.disagreement)
+
+
+def frozen_members(ensemble: DiscriminatorEnsemble) -> List[Optional[FrozenMlp]]:
+    """Each member's MLP, frozen; ``None`` for a member that is not an MLP on ``(s, s')`` alone."""
+    frozen: List[Optional[FrozenMlp]] = []
+    for member in ensemble.members:
+        on_transitions = getattr(member, "use_state", False) and getattr(member, "use_next_state", False)
+        on_transitions = on_transitions and not getattr(member, "use_action", True) and not getattr(member, "use_done", True)
+        frozen.append(freeze_mlp(member.mlp) if on_transitions and hasattr(member, "mlp") else None)
+    return frozen
