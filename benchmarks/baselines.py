@@ -5,6 +5,8 @@ built on the ``imitation`` library and Stable-Baselines3:
 * ``mpail``: :class:`~sb3_mpail.MPAIL`.
 * ``mpail_om``: MPAIL-OM, :class:`~sb3_mpail.MPAIL` planning through a dynamics model learned online from its own
   transitions (``dynamics="learned"``), no prior model: as much information as GAIL has.
+* ``mpail_ensemble``: :class:`~sb3_mpail.MPAIL` whose cost is a discriminator ensemble's mean logit less its spread
+  (``discriminator_ensemble_size=5``, ``discriminator_disagreement=1``), its other settings ``mpail.yml``'s.
 * ``gail``: imitation's GAIL, PPO generator, state-only discriminator ``d(s, s')`` (MPAIL's discriminator,
   :func:`~sb3_mpail.mppi.costs.make_transition_discriminator`; dummy zero actions in the demos, never read). With
   ``reward_net_kwargs`` ``features`` it sees only those features of the state, in any form MPAIL's
@@ -67,11 +69,14 @@ ACTION_DEMO_DIR = Path(__file__).resolve().parent / "action_demos"
 #: the scripts that made the shipped demos
 DEMO_SCRIPT_DIR = Path(__file__).resolve().parent.parent / "demos"
 
-ALGOS: Tuple[str, ...] = ("mpail", "mpail_om", "gail", "airl", "bc", "irl_mpc")
+#: MPAIL's variants: algorithms trained by :func:`train_mpail`, each with its own hyperparameter file
+MPAIL_VARIANTS: Tuple[str, ...] = ("mpail", "mpail_om", "mpail_ensemble")
+ALGOS: Tuple[str, ...] = (*MPAIL_VARIANTS, "gail", "airl", "bc", "irl_mpc")
 #: names used in every table and figure
 ALGO_LABELS: Dict[str, str] = {
     "mpail": "MPAIL",
     "mpail_om": "MPAIL-OM (dynamics learned online)",
+    "mpail_ensemble": "MPAIL, 5-discriminator ensemble",
     "gail": "GAIL (state-only)",
     "airl": "AIRL (obs-only)",
     "bc": "BC (uses expert actions)",
@@ -576,7 +581,8 @@ def train_mpail(
     name: str = "mpail",
 ) -> Any:
     """
-    :class:`~sb3_mpail.MPAIL` with ``mpail.yml``'s (or ``mpail_om.yml``'s) settings, evaluated at the end of rollouts.
+    :class:`~sb3_mpail.MPAIL` with ``mpail.yml``'s (or another of :data:`MPAIL_VARIANTS`' files') settings, evaluated at
+    the end of rollouts.
 
     :param env_id: gymnasium id
     :param demos: observation-only demos
@@ -586,7 +592,7 @@ def train_mpail(
     :param hyperparams: the config entry without :data:`META_KEYS`
     :param eval_every: env steps between ``on_eval`` calls (also called at the end)
     :param on_eval: the evaluation hook
-    :param name: the algorithm's name in ``on_eval``'s dict (``mpail`` or ``mpail_om``)
+    :param name: the algorithm's name in ``on_eval``'s dict (one of :data:`MPAIL_VARIANTS`)
     """
     from sb3_mpail.mpail import MPAIL
 
@@ -636,7 +642,7 @@ def train_baseline(
         if on_eval is not None:
             on_eval(0, {"bc": policy})
         return policy
-    if algo in ("mpail", "mpail_om"):
+    if algo in MPAIL_VARIANTS:
         return train_mpail(env_id, demos, timesteps, seed, n_envs, hp, eval_every, on_eval, algo)
     raise ValueError(f"Unknown algorithm {algo!r}; expected one of {ALGOS}.")
 

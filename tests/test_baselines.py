@@ -34,6 +34,8 @@ CARTPOLE, LAP, RACETRACK = "sb3_mpail/ContinuousCartPole-v0", "sb3_mpail/Navigat
 TINY = {
     "mpail": dict(n_envs=2, n_steps=16, policy_kwargs="dict(n_samples=16, horizon=3, n_iterations=1)"),
     "mpail_om": dict(n_envs=2, n_steps=16, policy_kwargs="dict(dynamics='learned', n_samples=16, horizon=3, n_iterations=1)"),
+    "mpail_ensemble": dict(n_envs=2, n_steps=16, policy_kwargs="dict(discriminator_ensemble_size=2, n_samples=16, horizon=3, "
+                                                               "n_iterations=1)"),
     "gail": dict(n_envs=2, n_steps=16, batch_size=32, n_epochs=1, n_timesteps=64),
     "airl": dict(n_envs=2, n_steps=16, batch_size=32, n_epochs=1, n_timesteps=64),
     "bc": dict(n_epochs=1),
