@@ -143,6 +143,10 @@ VARIANTS: Dict[str, Variant] = {
         "5 discriminators, the cost their mean logit less their standard deviation (disagreement as an OOD penalty)",
         lambda: dict(discriminator_ensemble_size=5, discriminator_disagreement=1.0),
     ),
+    "discriminator-ensemble-mean": Variant(
+        "5 discriminators, the cost their mean logit alone (no disagreement term: does the averaging or the penalty help?)",
+        lambda: dict(discriminator_ensemble_size=5, discriminator_disagreement=0.0),
+    ),
     "gradient-penalty": Variant(
         "a gradient penalty on the discriminator (weight 10, WGAN-GP's, between expert and agent) beside spectral norm",
         algorithm_kwargs=dict(discriminator_gradient_penalty=10.0),

@@ -322,3 +322,5 @@ def test_ensembles_of_members_with_different_layers_plan_through_the_module_path
     members = [th.nn.Sequential(th.nn.Linear(24, width), th.nn.ReLU(), th.nn.Linear(width, 1)).eval() for width in (32, 16)]
     assert FrozenEnsembleCost.build([freeze_mlp(member) for member in members], 12, 1.0) is None
     assert FrozenEnsembleCost.build([freeze_mlp(members[0])] * 2, 12, 1.0) is not None
+    linear = th.nn.Sequential(th.nn.Linear(24, 1)).eval()  # no hidden layer
+    assert FrozenEnsembleCost.build([freeze_mlp(linear)] * 2, 12, 1.0) is None

@@ -372,16 +372,17 @@ class LaneFrameFeatures(IndexPairFeatures):
         n_x, n_y = np.ceil((points.max(axis=0) + margin - origin) / self.cell_size).astype(int) + 1
         centres = th.as_tensor(origin + self.cell_size * (np.stack(np.meshgrid(np.arange(n_x), np.arange(n_y)), -1) + 0.5))
         segments = self.segment_starts, self.segment_directions, self.segment_lengths
-        distances = [squared_segment_distances(chunk.float(), *segments) for chunk in centres.reshape(-1, 2).split(4096)]
         # a segment can be nearest to a point of a cell only if it lies within the nearest's distance to the cell's
         # centre plus the cell's diagonal (the triangle inequality, twice): each cell keeps those, up to a cap
-        diagonal = self.cell_size * math.sqrt(2)
-        windows = [(chunk.min(dim=1, keepdim=True).values.sqrt() + diagonal) ** 2 for chunk in distances]
-        most = max(int((chunk <= window).sum(dim=1).max()) for chunk, window in zip(distances, windows))
-        n_candidates = min(MAX_CANDIDATE_SEGMENTS, most)
-        candidates = th.cat([chunk.topk(n_candidates, largest=False).indices for chunk in distances])
+        diagonal, nearest_first, most = self.cell_size * math.sqrt(2), [], 0
+        for chunk in centres.reshape(-1, 2).float().split(4096):  # chunks: cells x segments can be large
+            distances = squared_segment_distances(chunk, *segments)
+            window = (distances.min(dim=1, keepdim=True).values.sqrt() + diagonal) ** 2
+            most = max(most, int((distances <= window).sum(dim=1).max()))
+            nearest_first.append(distances.topk(min(MAX_CANDIDATE_SEGMENTS, len(lengths)), largest=False).indices)
+        candidates = th.cat(nearest_first)[:, : min(MAX_CANDIDATE_SEGMENTS, most)]
         self.register_buffer("grid_origin", th.as_tensor(origin, dtype=th.float32), persistent=False)
-        self.register_buffer("grid_candidates", candidates.reshape(int(n_y), int(n_x), n_candidates), persistent=False)
+        self.register_buffer("grid_candidates", candidates.reshape(int(n_y), int(n_x), -1), persistent=False)
 
     def forward(self, states: th.Tensor) -> th.Tensor:
         positions, (cos, sin) = states[:, self.indices["position"]], states[:, self.indices["heading"]].unbind(dim=1)

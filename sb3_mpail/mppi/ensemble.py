@@ -71,13 +71,13 @@ class FrozenEnsembleCost:
                         mlps[0].activations[layer]) for layer in range(1, len(mlps[0].weights) - 1)]  # fmt: skip
         self.output_weight = th.stack([mlp.weights[-1][:, 0] for mlp in mlps])[:, None]  # (K, 1, hidden)
         self.output_bias = th.stack([mlp.biases[-1][0] for mlp in mlps])[:, None]  # (K, 1)
-        self.n_members, self.disagreement = len(mlps), disagreement
+        self.disagreement = disagreement
 
     @staticmethod
     def build(mlps: Sequence[Optional[FrozenMlp]], state_dim: int, disagreement: float) -> Optional["FrozenEnsembleCost"]:
         """
-        The view, or ``None`` where the members are not MLPs of one architecture on ``2 * state_dim`` inputs with one
-        output and the same activations.
+        The view, or ``None`` where the members are not MLPs of one architecture (at least one hidden layer) on
+        ``2 * state_dim`` inputs with one output and the same activations.
         """
         frozen = [mlp for mlp in mlps if mlp is not None]
         if len(frozen) < len(mlps):
@@ -87,7 +87,7 @@ class FrozenEnsembleCost:
         if len(shapes) != 1 or len(activations) != 1:
             return None
         layers = next(iter(shapes))
-        if layers[0][0] != 2 * state_dim or layers[-1][1] != 1 or frozen[0].activations[-1] is not None:
+        if len(layers) < 2 or layers[0][0] != 2 * state_dim or layers[-1][1] != 1 or frozen[0].activations[-1] is not None:
             return None
         return FrozenEnsembleCost(frozen, state_dim, disagreement)
 
@@ -104,8 +104,8 @@ class FrozenEnsembleCost:
         n_states, n_envs, n_samples, state_dim = states.shape
         rows = states[:-1].reshape(-1, state_dim), states[1:].reshape(-1, state_dim)
         logits = workspace.get("ensemble_logits", (len(rows[0]),), states)
-        # chunks whose K activations stay in the CPU cache between layers (half of fused.chunk_rows(): timed faster
-        # than the whole batch or smaller chunks on AMD EPYC)
+        # chunks whose K activations stay in the CPU cache between layers (half of fused.chunk_rows(): faster than the
+        # whole batch in a timing on a busy 2-core AMD EPYC, about as fast as smaller chunks)
         chunk = max(1, chunk_rows() // 2)
         for start in range(0, len(logits), chunk):
             logits[start : start + chunk] = self.logits(rows[0][start : start + chunk], rows[1][start : start + chunk])
