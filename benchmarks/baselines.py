@@ -189,7 +189,7 @@ def observation_only_transitions(
     :param env: the training env (its spaces check the demos)
     :param feature_indices: the demos hold only these state dimensions: they are written there into otherwise zero
         states, since imitation batches demo and agent states together; the discriminator must then read only those
-        dimensions (:class:`FeatureSelectingRewardNet`)
+        dimensions (:class:`FeatureMappedRewardNet` with these indices)
     """
     if feature_indices is None:
         pairs = load_demos(path, env.observation_space)
