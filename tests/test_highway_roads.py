@@ -128,3 +128,13 @@ def test_shipped_highway_demos_end_fast_in_the_rightmost_lane():
     # highway-v0's 4 lanes are 4 m wide, centred on y = 0, 4, 8, 12 (12: the rightmost); its top reward from 30 m/s
     np.testing.assert_allclose(10 * demos[:, -20:, 1], 12.0, atol=0.2)
     np.testing.assert_allclose(10 * demos[:, -20:, 2], 30.0, atol=0.2)
+
+
+def test_racetrack_episodes_go_on_off_the_road_on_every_highway_env_version():
+    env = gym.make("sb3_mpail/Racetrack-v0")
+    env.reset(seed=0)
+    on_road, terminated, truncated = [], False, False
+    while not (terminated or truncated):
+        _, _, terminated, truncated, info = env.step(np.array([1.0], dtype=np.float32))  # full left: off the road
+        on_road.append(bool(info["rewards"]["on_road_reward"]))
+    assert not all(on_road) and len(on_road) == 200 and truncated and not terminated
