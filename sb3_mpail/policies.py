@@ -59,6 +59,8 @@ def deterministic_planning_seed(*inputs: np.ndarray) -> int:
     for array in inputs:
         digest.update(np.ascontiguousarray(array, dtype=np.float32).tobytes())
     return int.from_bytes(digest.digest(), "little") >> 1  # torch seeds are below 2**63
+
+
 #: what the errors on a non-finite observation and on a non-finite plan advise
 NON_FINITE_OBSERVATION = "the planner cannot plan from it. Check the environment (SB3's VecCheckNan wrapper finds the step)."
 #: observations beyond this magnitude are refused: float32 products of two such values overflow
