@@ -12,7 +12,8 @@ BENCHMARKS_FILE = Path(__file__).resolve().parent.parent / "BENCHMARKS.md"
 
 
 #: how the library's deterministic planning draws its samples, recorded beside the evaluations made with it: an earlier
-#: version drew the same samples at every step (a worse planner), and results that lack this record came from it
+#: version drew the same samples at every step (a worse planner), and locomotion results that lack this record came
+#: from it
 DETERMINISTIC_NOISE = "fresh at every step"
 #: what evaluations of that earlier version (December 2 07:15 to December 3 14:45) record where one was marked after
 #: the fact; navigation runs from before it record nothing, and were evaluated with fresh samples
