@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from sb3_mpail import MPAIL
+from sb3_mpail.mppi.constraints import RectangleObstacles
 from sb3_mpail.mppi.costs import FeatureSelection
 from sb3_mpail.mppi.dynamics import LearnedDynamics, PointMassDynamics
 from sb3_mpail.mppi.highway_dynamics import HighwayKinematics, RacetrackKinematics
@@ -60,11 +61,12 @@ def test_ant_mpail_om_trains_with_the_shipped_zoo_entry_learning_the_27d_model_o
     assert int(model.policy.dynamics.epochs_trained) > 0
 
 
-def test_point_maze_trains_with_the_shipped_zoo_entry_planning_through_the_wall_free_point_mass(tmp_path):
+def test_point_maze_trains_with_the_shipped_zoo_entry_planning_through_the_point_mass_with_the_walls_as_a_cost(tmp_path):
     pytest.importorskip("mujoco")
     pytest.importorskip("gymnasium_robotics")
     model = zoo_train("sb3_mpail/PointMaze-v0", 400, tmp_path)
     assert isinstance(model.policy.dynamics, PointMassDynamics)
+    assert isinstance(model.policy.planner.constraint_cost, RectangleObstacles)
     # the discriminator sees the ball's position and velocity; the value also sees the goal
     assert model.policy.discriminator_features.indices.tolist() == [0, 1, 2, 3]
     assert model.policy.value_net[0].in_features == 6
