@@ -371,9 +371,9 @@ def make_adversarial(algo: str, env: VecEnv, demos: DemoSource, seed: int, hyper
     :param hyperparams: the config entry without :data:`META_KEYS`; keys other than :data:`ADVERSARIAL_KEYS` go to PPO
     """
     net_kwargs = dict(hyperparams.get("reward_net_kwargs") or {})
-    if net_kwargs.get("features") is not None and algo != "gail":
-        raise ValueError("Only GAIL's discriminator can read a subset of the state (reward_net_kwargs features).")
     features = net_kwargs.get("features")
+    if features is not None and algo != "gail":
+        raise ValueError("Only GAIL's discriminator can read features of the state (reward_net_kwargs features).")
     if hyperparams.get("demos_are_features") and not (isinstance(features, Sequence) and not isinstance(features, str)):
         raise ValueError("demos_are_features needs reward_net_kwargs features to list the state dimensions the demos hold; "
                          f"got {features!r}.")  # fmt: skip

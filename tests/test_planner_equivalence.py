@@ -10,9 +10,11 @@ import torch as th
 
 import sb3_mpail.mppi.fused as fused
 from sb3_mpail.envs.navigation import NavigationEnv
-from sb3_mpail.mppi import AngleFeatures, KinematicBicycle, PendulumDynamics
+from sb3_mpail.mppi import AngleFeatures, KinematicBicycle, PendulumDynamics, ensemble
 from sb3_mpail.mppi.costs import MappedView
 from sb3_mpail.mppi.dynamics import LearnedDynamics
+from sb3_mpail.mppi.ensemble import FrozenEnsembleCost
+from sb3_mpail.mppi.fused import freeze_mlp
 from sb3_mpail.mppi.planner import rollout
 from sb3_mpail.mppi.reference import rollout as rollout_step_by_step
 from sb3_mpail.policies import MPPIPolicy
@@ -301,9 +303,6 @@ def test_compiled_planner_matches_the_eager_one():
 
 @pytest.mark.parametrize("features, chunk_rows", [(None, None), ({"angles": [5]}, None), (None, 700)])
 def test_discriminator_ensembles_plan_through_their_batched_view_and_match_the_reference(features, chunk_rows, monkeypatch):
-    from sb3_mpail.mppi import ensemble
-    from sb3_mpail.mppi.ensemble import FrozenEnsembleCost
-
     if chunk_rows is not None:  # chunks of 350 rows, not whole time steps (192 rows each)
         monkeypatch.setattr(ensemble, "chunk_rows", lambda: chunk_rows)
     policy = make_policy(NAVIGATION, "bicycle", n_samples=64, discriminator_ensemble_size=3, discriminator_disagreement=1.5,
@@ -316,9 +315,6 @@ def test_discriminator_ensembles_plan_through_their_batched_view_and_match_the_r
 
 
 def test_ensembles_of_members_with_different_layers_plan_through_the_module_path():
-    from sb3_mpail.mppi.ensemble import FrozenEnsembleCost
-    from sb3_mpail.mppi.fused import freeze_mlp
-
     members = [th.nn.Sequential(th.nn.Linear(24, width), th.nn.ReLU(), th.nn.Linear(width, 1)).eval() for width in (32, 16)]
     assert FrozenEnsembleCost.build([freeze_mlp(member) for member in members], 12, 1.0) is None
     assert FrozenEnsembleCost.build([freeze_mlp(members[0])] * 2, 12, 1.0) is not None
