@@ -65,6 +65,11 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         "transition's (DAC's answer to a learned reward's sign on tasks that end episodes)",
         changes=dict(prior_terminations="absorbing"),
     ),
+    "softplus-reward": dict(
+        question="the learned reward -log(1 - D) = softplus(d) (GAIL's form, positive everywhere) instead of the logit d: "
+        "staying up always pays, so a fall forfeits the rest of the episode's reward",
+        changes=dict(policy_kwargs=dict(reward_form="softplus")),
+    ),
     "prior-updates-1": dict(question="one prior update per env step", changes=dict(prior_updates_per_step=1.0)),
     "prior-128": dict(
         question="the prior's actor and Q networks 128 x 128 instead of 256 x 256 (an update takes 0.6x the time)",

@@ -609,9 +609,8 @@ class MPAIL(BaseAlgorithm):
         self.logger.record("rollout/learned_reward_mean", rewards.mean().item())
 
     def _learned_reward(self, observations: th.Tensor, next_observations: th.Tensor) -> th.Tensor:
-        """``r = d_theta(s, s')`` on ``(batch, obs_dim)`` observations, ``(batch,)``."""
-        features, next_features = self.policy.features(observations), self.policy.features(next_observations)
-        return self.policy.discriminator(features, None, next_features, None)
+        """``r(d_theta(s, s'))`` on ``(batch, obs_dim)`` observations, ``(batch,)``, in the policy's ``reward_form``."""
+        return self.policy.learned_reward(observations, next_observations)
 
     def _prior_replay(self) -> PriorReplay:
         """The policy prior's replay of every transition (created on first use; never saved, as SB3's replay buffers)."""

@@ -20,16 +20,19 @@ from sb3_mpail.checks import (
     check_arguments,
     check_finite,
     check_signature,
+    one_of,
     per_action_dimension,
 )
 from sb3_mpail.mppi.constraints import make_constraint_cost
 from sb3_mpail.mppi.costs import (
+    REWARD_FORMS,
     FeatureMap,
     FeatureSpec,
     MappedNetwork,
     StandardisedFeatures,
     TerminalValue,
     TransitionCost,
+    learned_reward,
     make_transition_discriminator,
     make_value_network,
 )
@@ -142,6 +145,10 @@ class MPPIPolicy(BasePolicy):
         prior's networks see the raw observations
     :param min_input_scale: the floor of each standardised input's scale (``1``: inputs that vary less than one unit
         in the demos are only centred)
+    :param reward_form: the learned reward as a function of the discriminator's logit ``d``
+        (:data:`~sb3_mpail.mppi.costs.REWARD_FORMS`), for the planner's step costs, the value's returns and the prior's
+        Q targets alike: ``"logit"``, ``d`` itself (AIRL's form, the paper's), or ``"softplus"``, ``-log(1 - D)``
+        (GAIL's form), positive everywhere, so that on tasks whose episodes end at a fall staying up always pays
     :raises ValueError: a setting is out of its range (each is named)
     :raises TypeError: ``step_cost``, ``terminal_value``, ``constraint_cost`` or ``dynamics`` cannot be called with the
         arguments the planner gives it
@@ -180,6 +187,7 @@ class MPPIPolicy(BasePolicy):
         n_proposals: int = 24,
         standardise_inputs: bool = False,
         min_input_scale: float = 1.0,
+        reward_form: str = "logit",
     ):
         super().__init__(observation_space, action_space)
         if not isinstance(observation_space, spaces.Box) or len(observation_space.shape) != 1:
@@ -210,6 +218,7 @@ class MPPIPolicy(BasePolicy):
             n_proposals=(n_proposals, NON_NEGATIVE_INTEGER),
             standardise_inputs=(standardise_inputs, BOOLEAN),
             min_input_scale=(min_input_scale, POSITIVE_NUMBER),
+            reward_form=(reward_form, one_of(tuple(REWARD_FORMS))),
         )
         if step_cost is not None:
             check_signature(step_cost, "step_cost", "c(states, next_states) -> costs", 2)
@@ -245,7 +254,9 @@ class MPPIPolicy(BasePolicy):
             n_proposals=n_proposals,
             standardise_inputs=standardise_inputs,
             min_input_scale=min_input_scale,
+            reward_form=reward_form,
         )
+        self.reward_form = reward_form
         self.discriminator_features: nn.Module | None = None
         self.feature_space = observation_space
         if discriminator_features is not None:
@@ -280,7 +291,9 @@ class MPPIPolicy(BasePolicy):
         self.planner = MPPIPlanner(
             dynamics=self.dynamics,
             sampler=make_sampler(sampler, low, high, noise_std, sampler_kwargs),
-            step_cost=step_cost if step_cost is not None else TransitionCost(self.discriminator, self.discriminator_features),
+            step_cost=step_cost
+            if step_cost is not None
+            else TransitionCost(self.discriminator, self.discriminator_features, reward_form),
             terminal_value=terminal_value,
             # the paper's zero mean, kept inside the bounds for spaces that exclude 0
             neutral_action=th.as_tensor(np.clip(np.zeros_like(low), low, high)),
@@ -312,6 +325,11 @@ class MPPIPolicy(BasePolicy):
         for module in self.modules():
             if isinstance(module, StandardisedFeatures) and not module.fitted:
                 module.fit(states)
+
+    def learned_reward(self, observations: th.Tensor, next_observations: th.Tensor) -> th.Tensor:
+        """The learned reward of ``(batch, obs_dim)`` transitions, ``(batch,)``, in the policy's ``reward_form``."""
+        features = self.discriminator_features
+        return learned_reward(self.discriminator, features, observations, next_observations, self.reward_form)
 
     def features(self, states: th.Tensor) -> th.Tensor:
         """What the discriminator sees of ``(batch, state_dim)`` states: ``discriminator_features`` or the states."""

@@ -395,3 +395,21 @@ def test_a_discriminator_ensemble_costs_its_mean_logit_less_its_spread_and_train
     action, _ = model.predict(observation, deterministic=True)
     model.save(tmp_path / "model")
     assert np.array_equal(MPAIL.load(tmp_path / "model").predict(observation, deterministic=True)[0], action)
+
+
+def test_the_softplus_reward_form_pays_softplus_of_the_logit_in_planning_the_value_and_the_prior(demos, tmp_path):
+    planner = dict(TINY_PLANNER, reward_form="softplus", policy_prior=True, n_proposals=2, prior_kwargs=dict(net_arch=(8,)))
+    model = make_model(demos, discriminator_update_interval=1, prior_batch_size=8, policy_kwargs=planner).learn(16)
+    model.policy.set_training_mode(False)
+    states, next_states = th.randn(2, 5, 3), th.randn(2, 5, 3)
+    with th.no_grad():
+        logits = model.policy.discriminator(states.view(10, 3), None, next_states.view(10, 3), None)
+        rewards = model._learned_reward(states.view(10, 3), next_states.view(10, 3))
+        step_costs = model.policy.planner.step_cost(states, next_states)
+        # the fused views sum logits over the horizon, so this form plans on the module path
+        assert model.policy.planner.step_cost.planning_view(3) is None
+    assert (rewards > 0).all()
+    assert th.allclose(rewards, th.nn.functional.softplus(logits))
+    assert th.allclose(step_costs, -rewards.view(2, 5))
+    model.save(tmp_path / "model")
+    assert MPAIL.load(tmp_path / "model").policy.reward_form == "softplus"

@@ -596,38 +596,68 @@ class MappedView:
         return self.view(self._mapped(states), *arguments)
 
 
-class TransitionCost(nn.Module):
+#: the learned reward as a function of the discriminator's logit ``d = log D - log(1 - D)``: ``"logit"`` is ``d`` itself
+#: (AIRL's form, the paper's), negative wherever a transition looks more like the agent's than the expert's;
+#: ``"softplus"`` is ``-log(1 - D) = softplus(d)`` (GAIL's form), positive everywhere, so staying alive always pays:
+#: where falls end episodes, a mostly negative reward pays the agent to end them
+REWARD_FORMS = {"logit": lambda logits: logits, "softplus": nn.functional.softplus}
+
+
+def learned_reward(
+    discriminator: nn.Module,
+    features: Optional[nn.Module],
+    states: th.Tensor,
+    next_states: th.Tensor,
+    reward_form: str = "logit",
+) -> th.Tensor:
     """
-    Step cost ``c(s, s') = -d_theta(phi(s), phi(s'))`` over any leading batch shape.
+    The learned reward of ``(batch, state_dim)`` transitions, ``(batch,)``: the discriminator's logit on the features of
+    ``s`` and ``s'``, in the :data:`REWARD_FORMS` form ``reward_form``.
 
     :param discriminator: the reward net giving the logit ``d_theta``
     :param features: the discriminator's feature map ``phi``; ``None``: the states themselves
+    :param states: ``s``
+    :param next_states: ``s'``
+    :param reward_form: a key of :data:`REWARD_FORMS`
+    """
+    if features is not None:
+        states, next_states = features(states), features(next_states)
+    return REWARD_FORMS[reward_form](discriminator(states, None, next_states, None))
+
+
+class TransitionCost(nn.Module):
+    """
+    Step cost ``c(s, s') = -r(d_theta(phi(s), phi(s')))`` over any leading batch shape, ``r`` the reward form.
+
+    :param discriminator: the reward net giving the logit ``d_theta``
+    :param features: the discriminator's feature map ``phi``; ``None``: the states themselves
+    :param reward_form: the learned reward as a function of the logit, a key of :data:`REWARD_FORMS`
     """
 
-    def __init__(self, discriminator: BasicRewardNet, features: Optional[nn.Module] = None):
+    def __init__(self, discriminator: BasicRewardNet, features: Optional[nn.Module] = None, reward_form: str = "logit"):
         super().__init__()
         self.discriminator = discriminator
         self.features = features
+        self.reward_form = reward_form
         self._planning_views: ViewCache[FusedTransitionCost] = ViewCache()
 
     def forward(self, states: th.Tensor, next_states: th.Tensor) -> th.Tensor:
         batch_shape = states.shape[:-1]
         states, next_states = states.reshape(-1, states.shape[-1]), next_states.reshape(-1, states.shape[-1])
-        if self.features is not None:
-            states, next_states = self.features(states), self.features(next_states)
-        return -self.discriminator(states, None, next_states, None).view(batch_shape)
+        return -learned_reward(self.discriminator, self.features, states, next_states, self.reward_form).view(batch_shape)
 
     def planning_view(self, state_dim: int) -> Optional[Union[FusedTransitionCost, FrozenEnsembleCost, MappedView]]:
         """
         The fused whole-horizon cost with the discriminator's weights frozen (until they change), behind the feature
         map if there is one (:class:`~sb3_mpail.mppi.ensemble.FrozenEnsembleCost` for an ensemble), or ``None`` where
         the module path must be used: gradients enabled, training mode (spectral norm's power iteration then updates
-        its vectors on every call), or a discriminator other than MLPs on ``(s, s')``.
+        its vectors on every call), a reward form other than the logit (the fused views sum logits over the horizon),
+        or a discriminator other than MLPs on ``(s, s')``.
 
         :param state_dim: size of a state
         """
         net = self.discriminator
-        if th.is_grad_enabled() or net.training:
+        if th.is_grad_enabled() or net.training or self.reward_form != "logit":
             return None
 
         def inputs(mlp: Optional[FrozenMlp]) -> int:  # what each state gives the first layer: the mapped features
