@@ -12,6 +12,8 @@ policy's figures come from the shipped demos' information file (``sb3_mpail/data
   score and the share of steps on the road;
 - ``highway``: highway-env ``highway-v0`` (no other vehicles) driven by acceleration and steering: its return as a
   normalised score, the share of steps on the road and the mean speed;
+- ``highway_traffic``: highway-env ``highway-fast-v0`` in traffic (20 IDM/MOBIL vehicles) driven by acceleration and
+  steering: the share of episodes ending in a collision, the mean speed, the return and its normalised score;
 - ``ant``: MuJoCo Ant with an online-learned model (MPAIL-OM): its return as a normalised score and its forward speed,
   next to the expert's;
 - ``pointmaze``: gymnasium-robotics PointMaze (U-maze, fixed start and goal cells) planned through a wall-free
@@ -145,6 +147,36 @@ def road_reference(stats: Dict) -> str:
 ROAD_COLUMNS = (("return", "return"), ("score", "normalised score"), ("on_road", "share of steps on the road"))
 
 
+def traffic_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, float]:
+    """
+    highway-env users' own figures of the deterministic planner in traffic: the share of episodes that end in a
+    collision (``info["crashed"]``, which ends them), the mean speed over every step (``info["speed"]``, m/s), the mean
+    return (speed, rightmost lane, 0 off the road, per step, less for a crash) and its normalised score. A crash ends
+    the episode early, so a low return can be a crash or a slow drive: read the crash rate and speed beside it.
+    """
+    speeds: List[float] = []
+
+    def record_step(info: Dict, _: bool) -> None:
+        speeds.append(float(info["speed"]))
+
+    episodes = evaluate_episodes(model, "sb3_mpail/HighwayTraffic-v0", n_episodes, EVAL_SEED, on_step=record_step)
+    return {
+        "crashed": float(np.mean([info["crashed"] for info in episodes.final_infos])),
+        "speed": float(np.mean(speeds)),
+        "return": episodes.mean_return,
+        "score": normalised_score(episodes.mean_return, stats),
+    }
+
+
+def traffic_reference(stats: Dict) -> str:
+    return (
+        f"Expert ({stats['expert_algo']}) {stats['expert_return_mean']:.1f}, crashed in {stats['expert_crash_rate']:.0%} "
+        f"of {stats['n_eval_episodes']} episodes at {stats['expert_speed_mean']:.1f} m/s (its demos: "
+        f"{len(stats['failed_demo_seeds'])} crashed episodes dropped, {stats['demo_speed_mean']:.1f} m/s); random "
+        f"{stats['random_return_mean']:.1f}, crashed in {stats['random_crash_rate']:.0%}, over 30 s episodes (151 steps)."
+    )
+
+
 def ant_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, float]:
     """
     Mean return of the deterministic planner, its normalised score and its forward speed (the torso's x velocity
@@ -249,6 +281,16 @@ SCENARIOS: Dict[str, Scenario] = {
         (*ROAD_COLUMNS, ("speed", "speed (m/s)")),
         road_reference,
         10,
+    ),
+    "highway_traffic": Scenario(
+        "sb3_mpail/HighwayTraffic-v0",
+        "highway_traffic",
+        "highway-env highway-fast-v0 in traffic (20 vehicles, acceleration and steering) from 16 IDM/MOBIL demos "
+        "(observations only)",
+        traffic_figures,
+        (("crashed", "crash rate"), ("speed", "speed (m/s)"), ("return", "return"), ("score", "normalised score")),
+        traffic_reference,
+        20,
     ),
     "ant": Scenario(
         "sb3_mpail/Ant-v0",

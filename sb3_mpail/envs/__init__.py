@@ -57,3 +57,15 @@ if "sb3_mpail/Racetrack-v0" not in gym.registry:
 # (200 steps at 5 Hz); needs the `scenarios` extra, and making it without highway-env raises an ImportError.
 if "sb3_mpail/Highway-v0" not in gym.registry:
     gym.register(id="sb3_mpail/Highway-v0", entry_point="sb3_mpail.envs.highway_roads:EgoHighwayEnv")
+
+# highway-env's highway-fast-v0 in traffic (3 lanes, 20 vehicles), continuous [acceleration, steering] at 5 Hz, observed
+# as the ego's state and the 5 nearest vehicles' (151 steps); needs the `scenarios` extra, and making it without
+# highway-env raises an ImportError. The Dense variant drives in highway-v0's traffic (4 lanes, 50 vehicles, 200 steps).
+if "sb3_mpail/HighwayTraffic-v0" not in gym.registry:
+    gym.register(id="sb3_mpail/HighwayTraffic-v0", entry_point="sb3_mpail.envs.highway_traffic:EgoTrafficEnv")
+if "sb3_mpail/HighwayTrafficDense-v0" not in gym.registry:
+    gym.register(
+        id="sb3_mpail/HighwayTrafficDense-v0",
+        entry_point="sb3_mpail.envs.highway_traffic:EgoTrafficEnv",
+        kwargs={"base": "highway"},
+    )

@@ -94,17 +94,21 @@ class EgoRoadEnv(gym.Env):
         self.observation_space = spaces.Box(-high, high, dtype=dtype)
         self.action_space = self.road_env.action_space
 
+    def observe(self) -> np.ndarray:
+        """The flat observation of the current state: the ego car's (see :func:`ego_observation`)."""
+        return ego_observation(self.road_env.vehicle, self.dtype)
+
     def reset(
         self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None
     ) -> Tuple[np.ndarray, Dict[str, Any]]:
         super().reset(seed=seed)
         _, info = self.road_env.reset(seed=seed, options=options)
-        return ego_observation(self.road_env.vehicle, self.dtype), info
+        return self.observe(), info
 
     def step(self, action: np.ndarray) -> Tuple[np.ndarray, float, bool, bool, Dict[str, Any]]:
         # float64, as numpy 1 computed it: numpy 2 keeps highway-env's action mapping in a float32 action's precision
         _, reward, terminated, truncated, info = self.road_env.step(np.asarray(action, dtype=np.float64))
-        return ego_observation(self.road_env.vehicle, self.dtype), float(reward), terminated, truncated, info
+        return self.observe(), float(reward), terminated, truncated, info
 
     def render(self) -> Optional[np.ndarray]:
         return self.road_env.render()

@@ -24,7 +24,11 @@ from sb3_mpail.mppi.dynamics import (
     make_dynamics,
 )
 from sb3_mpail.mppi.ensemble import DiscriminatorEnsemble
-from sb3_mpail.mppi.highway_dynamics import HighwayKinematics, RacetrackKinematics  # also registers them by name
+from sb3_mpail.mppi.highway_dynamics import (  # also registers them by name
+    HighwayKinematics,
+    HighwayTrafficKinematics,
+    RacetrackKinematics,
+)
 from sb3_mpail.mppi.planner import MPPIPlanner, PlanResult
 from sb3_mpail.mppi.sampling import ActionSampler, DeltaSampler, GaussianSampler
 
@@ -41,6 +45,7 @@ __all__ = [
     "DiscriminatorEnsemble",
     "GaussianSampler",
     "HighwayKinematics",
+    "HighwayTrafficKinematics",
     "KinematicBicycle",
     "LearnedDynamics",
     "MPPIPlanner",

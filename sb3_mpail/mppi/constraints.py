@@ -4,13 +4,15 @@ know, such as walls and obstacles, scored on every state a roll-out reaches. The
 a large cost on the states that violate them, so that the exponential weights drop the samples that do.
 """
 
-from typing import Any, Callable, Dict, Optional, Union
+import functools
+from typing import Any, Callable, Dict, Optional, Tuple, Union
 
 import numpy as np
 import torch as th
 from torch import nn
 
 from sb3_mpail.checks import check_signature
+from sb3_mpail.envs.highway_traffic import EGO_DIM, TRAFFIC_STATE_DIM, TRAFFIC_VEHICLES, VEHICLE_FEATURES
 
 
 class RectangleObstacles(nn.Module):
@@ -182,8 +184,108 @@ def point_maze_walls(margin: float = 0.1, weight: float = 100.0) -> RectangleObs
     return walls
 
 
+#: highway-env's lane width (m): its straight roads' lanes are centred on ``y = 0, 4, 8, ...``
+LANE_WIDTH = 4.0
+#: highway-env's vehicles' length and width (m)
+VEHICLE_SIZE = (5.0, 2.0)
+
+
+class TrafficCollisions(nn.Module):
+    """
+    Collisions with the other vehicles of ``sb3_mpail/HighwayTraffic-v0``'s states (:mod:`sb3_mpail.envs.highway_traffic`:
+    the ego's ``[x, y, ...]``, then per vehicle ``[presence, x, y, vx, vy]``, positions in ``position_scale`` metres),
+    and leaving the road. The obstacles move: each state is scored against the vehicles where that state puts them,
+    so the planning model's predicted traffic is what the ego must keep clear of.
+
+    For each present vehicle: ``weight * (1 + depth)`` when the ego's centre lies inside the rectangle (along the
+    road, ``x``, and across it, ``y``) where the two cars touch, each vehicle's length and width (5 m x 2 m: its
+    half sizes plus the ego's), inflated by ``margin``; ``depth`` is how far inside, in margins, on the nearer axis, so
+    that samples that all collide are ranked by how deep they go. 0 elsewhere. The rectangles lie along the road: the
+    observation has no heading of the other vehicles, and its vehicles drive along their lanes but for lane changes,
+    which the lateral margin covers. With ``road_edges``, the same cost when the ego's centre is closer to an edge
+    than its half width (its body leaves the road, where highway-env's reward is 0), ``depth`` in lateral margins.
+
+    :param margin: how far beyond the touching rectangle the cost reaches, along and across the road (m), ``> 0``:
+        along, constant-velocity traffic moves a few metres from its prediction within a second; across, less than
+        the 2 m between cars centred in neighbouring lanes, which may then pass each other
+    :param weight: the cost at the inflated rectangle's edge, ``> 0``: large against the learned costs, finite so that
+        the samples that collide are still ranked
+    :param road_edges: the road's edges ``(y_min, y_max)`` (m); ``None``: no cost for leaving the road
+    :param position_scale: metres per observation unit of the positions
+    """
+
+    def __init__(
+        self,
+        margin: Tuple[float, float] = (2.0, 1.0),
+        weight: float = 1000.0,
+        road_edges: Optional[Tuple[float, float]] = None,
+        position_scale: float = 10.0,
+    ):
+        super().__init__()
+        margin = tuple(float(value) for value in margin)
+        if len(margin) != 2 or min(margin) <= 0 or not weight > 0 or not position_scale > 0:
+            raise ValueError(
+                f"TrafficCollisions needs two margins > 0 (along and across the road), weight > 0 and position_scale "
+                f"> 0; got margin={margin}, weight={weight}, position_scale={position_scale}."
+            )
+        if road_edges is not None and not road_edges[0] + VEHICLE_SIZE[1] < road_edges[1]:
+            raise ValueError(f"TrafficCollisions' road_edges must be (y_min, y_max), wider than a car; got {road_edges}.")
+        self.register_buffer("margin", th.tensor(margin))
+        self.register_buffer("inflated_half_size", th.tensor(VEHICLE_SIZE) + self.margin)
+        self.weight, self.position_scale = float(weight), float(position_scale)
+        # where the ego's centre keeps its body on the road
+        half_width = VEHICLE_SIZE[1] / 2
+        self.road_edges = None if road_edges is None else (road_edges[0] + half_width, road_edges[1] - half_width)
+
+    def check_state_dim(self, state_dim: int) -> None:
+        """
+        Refuses states of another size than the traffic observation's.
+
+        :param state_dim: size of a state
+        :raises ValueError: ``state_dim`` is not :data:`~sb3_mpail.envs.highway_traffic.TRAFFIC_STATE_DIM`
+        """
+        if state_dim != TRAFFIC_STATE_DIM:
+            raise ValueError(
+                f"TrafficCollisions scores sb3_mpail/HighwayTraffic-v0's {TRAFFIC_STATE_DIM}-D states (the ego, then "
+                f"{TRAFFIC_VEHICLES} vehicles' {VEHICLE_FEATURES}); got {state_dim}-D states."
+            )
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        self.check_state_dim(states.shape[-1])  # Python integers: no host sync
+        ego = states[..., :2] * self.position_scale
+        vehicles = states[..., EGO_DIM:].unflatten(-1, (TRAFFIC_VEHICLES, len(VEHICLE_FEATURES)))  # (..., K, 5)
+        present = vehicles[..., 0] > 0.5
+        offsets = (ego.unsqueeze(-2) - vehicles[..., 1:3] * self.position_scale).abs()  # (..., K, 2), metres
+        # how far inside each inflated rectangle, in margins, on the nearer axis: positive inside
+        depth = ((self.inflated_half_size - offsets) / self.margin).amin(dim=-1)
+        costs = th.where(present & (depth > 0), self.weight * (1 + depth), th.zeros_like(depth)).sum(-1)
+        if self.road_edges is not None:
+            y, (low, high) = ego[..., 1], self.road_edges
+            beyond = th.maximum(low - y, y - high) / self.margin[1]
+            costs = costs + th.where(beyond > 0, self.weight * (1 + beyond), th.zeros_like(beyond))
+        return costs
+
+
+def highway_traffic_vehicles(lanes_count: int = 3, margin: Tuple[float, float] = (2.0, 1.0),
+                             weight: float = 1000.0) -> TrafficCollisions:  # fmt: skip
+    """
+    :class:`TrafficCollisions` of ``sb3_mpail/HighwayTraffic-v0``: its vehicles and the edges of its road (highway-fast's
+    3 lanes, 4 m wide, centred on ``y = 0, 4, 8`` m; ``lanes_count=4`` for ``sb3_mpail/HighwayTrafficDense-v0``).
+
+    :param lanes_count: the road's lanes
+    :param margin: how far beyond where two cars touch the cost reaches, along and across the road (m)
+    :param weight: the cost at the edge
+    """
+    return TrafficCollisions(margin, weight, road_edges=(-LANE_WIDTH / 2, LANE_WIDTH * (lanes_count - 0.5)))
+
+
 #: constraint costs by the name a ``constraint_cost`` setting (a YAML file's, say) can give
-CONSTRAINT_COSTS: Dict[str, Callable[[], nn.Module]] = {"parking_walls": parking_walls, "point_maze_walls": point_maze_walls}
+CONSTRAINT_COSTS: Dict[str, Callable[[], nn.Module]] = {
+    "parking_walls": parking_walls,
+    "point_maze_walls": point_maze_walls,
+    "highway_traffic_vehicles": highway_traffic_vehicles,
+    "highway_traffic_dense_vehicles": functools.partial(highway_traffic_vehicles, lanes_count=4),
+}
 
 
 def make_constraint_cost(
