@@ -13,7 +13,8 @@ policy's figures come from the shipped demos' information file (``sb3_mpail/data
 - ``highway``: highway-env ``highway-v0`` (no other vehicles) driven by acceleration and steering: its return as a
   normalised score, the share of steps on the road and the mean speed;
 - ``highway_traffic``: highway-env ``highway-fast-v0`` in traffic (20 IDM/MOBIL vehicles) driven by acceleration and
-  steering: the share of episodes ending in a collision, the mean speed, the return and its normalised score;
+  steering: the share of episodes ending in a collision, the mean speed, the return and its normalised score; and
+  the crash rate and speed of the same model in ``highway-v0``'s denser traffic;
 - ``ant``: MuJoCo Ant with an online-learned model (MPAIL-OM): its return as a normalised score and its forward speed,
   next to the expert's;
 - ``pointmaze``: gymnasium-robotics PointMaze (U-maze, fixed start and goal cells) planned through a wall-free
@@ -45,7 +46,7 @@ from sb3_mpail.demos import shipped_demo_info, shipped_demos
 from sb3_mpail.envs.ant import evaluate_ant
 from sb3_mpail.envs.lap import lap_metrics
 from sb3_mpail.envs.maze import point_maze_figures
-from sb3_mpail.evaluation import evaluate_episodes, normalised_score
+from sb3_mpail.evaluation import Episodes, evaluate_episodes, normalised_score
 from sb3_mpail.zoo import HYPERPARAMS
 
 RESULTS = Path(__file__).resolve().parent / "figures" / "scenarios.json"
@@ -151,20 +152,30 @@ def traffic_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, flo
     """
     highway-env users' own figures of the deterministic planner in traffic: the share of episodes that end in a
     collision (``info["crashed"]``, which ends them), the mean speed over every step (``info["speed"]``, m/s), the mean
-    return (speed, rightmost lane, 0 off the road, per step, less for a crash) and its normalised score. A crash ends
-    the episode early, so a low return can be a crash or a slow drive: read the crash rate and speed beside it.
+    return (speed, rightmost lane, 0 off the road, per step, less for a crash) and its normalised score, in the
+    training traffic (``highway-fast-v0``'s); and the crash rate and speed of the same model, unchanged, in
+    ``highway-v0``'s denser traffic (``dense_``: 4 lanes, 50 vehicles). A crash ends the episode early, so a low return
+    can be a crash or a slow drive: read the crash rate and speed beside it.
     """
-    speeds: List[float] = []
 
-    def record_step(info: Dict, _: bool) -> None:
-        speeds.append(float(info["speed"]))
+    def drive(env_id: str) -> Tuple[Episodes, float]:
+        speeds: List[float] = []
+        episodes = evaluate_episodes(model, env_id, n_episodes, EVAL_SEED,
+                                     on_step=lambda info, _: speeds.append(float(info["speed"])))  # fmt: skip
+        return episodes, float(np.mean(speeds))
 
-    episodes = evaluate_episodes(model, "sb3_mpail/HighwayTraffic-v0", n_episodes, EVAL_SEED, on_step=record_step)
+    def crash_rate(episodes: Episodes) -> float:
+        return float(np.mean([info["crashed"] for info in episodes.final_infos]))
+
+    episodes, speed = drive("sb3_mpail/HighwayTraffic-v0")
+    dense_episodes, dense_speed = drive("sb3_mpail/HighwayTrafficDense-v0")
     return {
-        "crashed": float(np.mean([info["crashed"] for info in episodes.final_infos])),
-        "speed": float(np.mean(speeds)),
+        "crashed": crash_rate(episodes),
+        "speed": speed,
         "return": episodes.mean_return,
         "score": normalised_score(episodes.mean_return, stats),
+        "dense_crashed": crash_rate(dense_episodes),
+        "dense_speed": dense_speed,
     }
 
 
@@ -173,7 +184,9 @@ def traffic_reference(stats: Dict) -> str:
         f"Expert ({stats['expert_algo']}) {stats['expert_return_mean']:.1f}, crashed in {stats['expert_crash_rate']:.0%} "
         f"of {stats['n_eval_episodes']} episodes at {stats['expert_speed_mean']:.1f} m/s (its demos: "
         f"{len(stats['failed_demo_seeds'])} crashed episodes dropped, {stats['demo_speed_mean']:.1f} m/s); random "
-        f"{stats['random_return_mean']:.1f}, crashed in {stats['random_crash_rate']:.0%}, over 30 s episodes (151 steps)."
+        f"{stats['random_return_mean']:.1f}, crashed in {stats['random_crash_rate']:.0%}, over 30 s episodes (151 steps). "
+        f"In highway-v0's traffic (40 s episodes): the expert crashed in {stats['dense_expert_crash_rate']:.0%} at "
+        f"{stats['dense_expert_speed_mean']:.1f} m/s, random in {stats['dense_random_crash_rate']:.0%}."
     )
 
 
@@ -288,7 +301,8 @@ SCENARIOS: Dict[str, Scenario] = {
         "highway-env highway-fast-v0 in traffic (20 vehicles, acceleration and steering) from 16 IDM/MOBIL demos "
         "(observations only)",
         traffic_figures,
-        (("crashed", "crash rate"), ("speed", "speed (m/s)"), ("return", "return"), ("score", "normalised score")),
+        (("crashed", "crash rate"), ("speed", "speed (m/s)"), ("return", "return"), ("score", "normalised score"),
+         ("dense_crashed", "highway-v0: crash rate"), ("dense_speed", "highway-v0: speed (m/s)")),
         traffic_reference,
         20,
     ),

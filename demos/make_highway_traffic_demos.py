@@ -9,9 +9,11 @@ the env's own continuous action. highway-fast simulates one step per 5 Hz action
 ``IDMVehicle`` would do but for the clipping (it may ask for up to ``6 m/s^2`` and ``pi/3`` rad).
 
 It scores the driver and a uniform-random policy on ``--eval-episodes`` seeded episodes each (return, share of
-episodes that end in a crash, mean speed), then records ``--n-demos`` collision-free episodes (reset seeds 1000,
-1001, ...; the seeds of episodes that crashed are listed in the metadata and skipped), keeps only the observations and
-writes ``<out-dir>/highway_traffic_<n>.npz`` and ``<out-dir>/highway_traffic.json``. Needs the ``scenarios`` extra.
+episodes that end in a crash, mean speed), in highway-fast's traffic and in ``highway-v0``'s
+(``sb3_mpail/HighwayTrafficDense-v0``: 4 lanes, 50 vehicles; the ``dense_`` figures), then records ``--n-demos``
+collision-free episodes (reset seeds 1000, 1001, ...; the seeds of episodes that crashed are listed in the metadata
+and skipped), keeps only the observations and writes ``<out-dir>/highway_traffic_<n>.npz`` and
+``<out-dir>/highway_traffic.json``. Needs the ``scenarios`` extra.
 
 Run from the repository root::
 
@@ -32,6 +34,7 @@ from expert_rollouts import DEMO_SEED_OFFSET, SHIPPED_DEMO_DIR, save_demos, save
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/HighwayTraffic-v0)
 
 ENV_ID = "sb3_mpail/HighwayTraffic-v0"
+DENSE_ENV_ID = "sb3_mpail/HighwayTrafficDense-v0"
 MAX_ACCELERATION = 5.0  # highway-env's acceleration for an action of 1
 MAX_STEERING = np.pi / 4  # and its steering
 TARGET_SPEED = 30.0  # m/s: highway-fast's speed reward is highest from 30 m/s, its lanes' speed limit
@@ -134,6 +137,11 @@ def main() -> None:
     eval_seeds = range(args.seed, args.seed + args.eval_episodes)
     expert_runs = [run_episode(env, seed, driver) for seed in eval_seeds]
     random_runs = [run_episode(env, seed, None) for seed in eval_seeds]
+    dense_env = gym.make(DENSE_ENV_ID)
+    dense_driver = IdmMobilDriver(dense_env)
+    dense_expert_runs = [run_episode(dense_env, seed, dense_driver) for seed in eval_seeds]
+    dense_random_runs = [run_episode(dense_env, seed, None) for seed in eval_seeds]
+    dense_env.close()
     demos: list[Episode] = []
     failed_demo_seeds: list[int] = []
     seed = DEMO_SEED_OFFSET
@@ -156,6 +164,8 @@ def main() -> None:
         "seed": args.seed,
         **figures(expert_runs, "expert"),
         **figures(random_runs, "random"),
+        **figures(dense_expert_runs, "dense_expert"),
+        **figures(dense_random_runs, "dense_random"),
         "n_eval_episodes": args.eval_episodes,
         "demo_returns": [run.episode_return for run in demos],
         "demo_speed_mean": figures(demos, "demo")["demo_speed_mean"],

@@ -268,3 +268,12 @@ def test_a_navigation_ablation_scored_by_the_same_samples_planner_is_marked_unti
     navigation_ablations.reevaluate_variant("concave-value", 1, tmp_path, tmp_path)
     text = navigation_ablations.report(tmp_path, ["concave-value"], "cmd")
     assert "| 2 (1 †) |" in text and "†: runs evaluated by a version whose deterministic planning drew the same" in text
+
+
+def test_every_scenario_names_its_experts_figures_from_its_shipped_demo_information():
+    from benchmarks.scenarios import SCENARIOS
+
+    for name, scenario in SCENARIOS.items():
+        stats = shipped_demo_info(scenario.demos)
+        assert stats["env_id"] == scenario.env_id, name
+        assert scenario.reference(stats), name  # every figure it quotes is in the information file
