@@ -30,6 +30,7 @@ Action-labelled demos for BC: ``python -m benchmarks.baselines make-action-demos
 
 import argparse
 import importlib.util
+import sys
 import tempfile
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
@@ -55,7 +56,7 @@ from torch.nn import functional as F
 from torch.nn.utils.parametrizations import spectral_norm
 
 import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/Navigation-v0)
-from sb3_mpail.demos import DemoSource, list_shipped_demos, load_demos, shipped_demos
+from sb3_mpail.demos import DemoSource, list_shipped_demos, load_demos, shipped_demo_info, shipped_demos
 from sb3_mpail.envs import cartpole
 from sb3_mpail.envs.locomotion import LOCOMOTION_TASKS
 from sb3_mpail.mppi.costs import FeatureMap, FeatureSpec, make_transition_discriminator
@@ -88,6 +89,8 @@ ENV_NAMES: Dict[str, str] = {
     "Pendulum-v1": "pendulum",
     "sb3_mpail/ContinuousCartPole-v0": "cartpole",
     "sb3_mpail/NavigationLap-v0": "lap",
+    "sb3_mpail/HighwayTraffic-v0": "highway_traffic",
+    "sb3_mpail/PointMaze-v0": "pointmaze",
     **LOCOMOTION_TASKS,
 }
 #: keys of a config entry that are strings of Python expressions (rl_zoo3 evaluates ``policy_kwargs`` this way)
@@ -653,11 +656,43 @@ def train_baseline(
 
 def _demo_script(name: str) -> Any:
     """The module ``demos/<name>.py`` (the scripts that made the shipped demos)."""
+    if str(DEMO_SCRIPT_DIR) not in sys.path:  # the scripts import their shared helpers as top-level modules
+        sys.path.append(str(DEMO_SCRIPT_DIR))
     spec = importlib.util.spec_from_file_location(name, DEMO_SCRIPT_DIR / f"{name}.py")
     assert spec is not None and spec.loader is not None
     script = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(script)
     return script
+
+
+#: the shipped sets whose expert is replayed from the demos' reset seeds, besides the MuJoCo tasks' (:func:`_demo_experts`)
+REPLAYED_EXPERTS = ("navigation", "highway_traffic", "pointmaze")
+
+
+def _demo_experts(
+    name: str, env_id: str, env: gym.Env, expert_path: Optional[Path], n_episodes: int
+) -> List[Tuple[int, Callable[[np.ndarray], np.ndarray]]]:
+    """The reset seed and the expert of each of a shipped set's first ``n_episodes`` demos, as its script made them."""
+    if env_id in LOCOMOTION_TASKS:  # the TD3 expert of demos/make_mujoco_demos.py --save-expert
+        td3 = TD3.load(expert_path, device="cpu")
+        first_seed = _demo_script("expert_rollouts").DEMO_SEED_OFFSET
+        return [(first_seed + i, lambda obs: td3.predict(obs, deterministic=True)[0]) for i in range(n_episodes)]
+    if name == "navigation":
+        script = _demo_script("make_navigation_demos")
+        ppo = PPO.load(expert_path or "/tmp/navigation_expert_ppo.zip", device="cpu")
+        expert = script.make_expert_policy(ppo, env)
+        return [(script.DEMO_SEED_BASE + i, expert) for i in range(n_episodes)]
+    if name == "pointmaze":  # stateless: the next cell follows from the ball's position
+        expert = _demo_script("make_maze_demos").MazeGraphExpert(env)
+        first_seed = _demo_script("expert_rollouts").DEMO_SEED_OFFSET
+        return [(first_seed + i, expert.action) for i in range(n_episodes)]
+    # highway_traffic: a fresh driver per episode (its lane-change timer is state); the crashed episodes' seeds skipped
+    script = _demo_script("make_highway_traffic_demos")
+    failed = set(shipped_demo_info(name)["failed_demo_seeds"])
+    seeds = [seed for seed in range(script.DEMO_SEED_OFFSET, script.DEMO_SEED_OFFSET + n_episodes + len(failed))
+             if seed not in failed]  # fmt: skip
+    drivers = [script.IdmMobilDriver(env) for _ in seeds]  # it decides from the env's state, not the observation
+    return [(seed, lambda _, driver=driver: driver()) for seed, driver in zip(seeds, drivers)]
 
 
 def _replay(env: gym.Env, act: Callable[[np.ndarray], np.ndarray], seed: int, steps: int) -> Tuple[np.ndarray, np.ndarray]:
@@ -724,9 +759,11 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
     script retrains the same expert bit for bit on this stack) from the demos' start seeds. Pendulum and cartpole:
     the actions are recovered from the shipped observations by inverting the env's known dynamics
     (:func:`pendulum_actions`, :func:`cartpole_actions`), so no expert is needed; every step is checked against the
-    exact model.
+    exact model. Highway in traffic and the point maze: replays the scripted expert of
+    ``demos/make_highway_traffic_demos.py`` (highway-env's IDM/MOBIL driver) or ``demos/make_maze_demos.py`` from the
+    demos' reset seeds.
 
-    :param env: ``navigation``, ``pendulum``, ``cartpole`` or a MuJoCo task's name
+    :param env: ``navigation``, ``pendulum``, ``cartpole``, ``highway_traffic``, ``pointmaze`` or a MuJoCo task's name
     :param expert_path: the navigation or MuJoCo expert
     :param out_dir: where the files go
     :raises RuntimeError: the actions do not reproduce a shipped demo
@@ -738,16 +775,9 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
     if not sizes:
         raise FileNotFoundError(f"No {name}_<n> demo set is shipped ({', '.join(list_shipped_demos())}).")
     episodes = [trajectory.obs for trajectory in shipped_demos(name, max(sizes))]
-    if env_id in LOCOMOTION_TASKS or name == "navigation":  # replay the saved expert from the demos' start seeds
-        if env_id in LOCOMOTION_TASKS:  # the TD3 expert of demos/make_mujoco_demos.py --save-expert
-            td3 = TD3.load(expert_path, device="cpu")
-            expert = lambda obs: td3.predict(obs, deterministic=True)[0]  # noqa: E731
-            seed_offset = _demo_script("expert_rollouts").DEMO_SEED_OFFSET
-        else:
-            script = _demo_script("make_navigation_demos")
-            ppo = PPO.load(expert_path or "/tmp/navigation_expert_ppo.zip", device="cpu")
-            expert, seed_offset = script.make_expert_policy(ppo, gym_env), script.DEMO_SEED_BASE
-        replays = [_replay(gym_env, expert, seed_offset + i, len(episode) - 1) for i, episode in enumerate(episodes)]
+    if name in REPLAYED_EXPERTS or env_id in LOCOMOTION_TASKS:
+        experts = _demo_experts(name, env_id, gym_env, expert_path, len(episodes))
+        replays = [_replay(gym_env, act, seed, len(episode) - 1) for (seed, act), episode in zip(experts, episodes)]
         reproduced, actions = [obs for obs, _ in replays], [acts for _, acts in replays]
     elif name in INVERSE_DYNAMICS:
         # both are unstable upright, so float32 actions replayed open loop drift: check each step instead
@@ -760,6 +790,7 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
     if not all(np.allclose(replayed, episode, atol=1e-4) for replayed, episode in zip(reproduced, episodes)):
         error = max(float(np.abs(replayed - episode).max()) for replayed, episode in zip(reproduced, episodes))
         raise RuntimeError(f"The actions do not reproduce {name}_{max(sizes)} (max error {error}).")
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
     written = []
     for n in sorted(sizes):
         written.append(action_demos_path(f"{name}_{n}", out_dir))

@@ -322,7 +322,7 @@ SCENARIOS: Dict[str, Scenario] = {
         pointmaze_figures,
         (("return", "return"), ("score", "normalised score"), ("success", "success rate"), ("wall_steps", "steps on a wall")),
         pointmaze_reference,
-        10,
+        20,
     ),
 }
 

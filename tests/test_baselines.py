@@ -134,6 +134,17 @@ def test_action_demos_match_the_shipped_observation_only_demos(tmp_path):
     np.testing.assert_array_equal(hopper.next_obs[: len(episodes[0]) - 1], episodes[0][1:])
 
 
+@pytest.mark.parametrize("env, demo_set", [("highway_traffic", "highway_traffic_16"), ("pointmaze", "pointmaze_4")])
+def test_scripted_experts_action_demos_replay_through_the_shipped_observations(tmp_path, env, demo_set):
+    # highway-env's IDM/MOBIL driver and the maze's graph expert, replayed from the demos' reset seeds, reproduce every
+    # shipped observation (make_action_demos checks it) with the actions of the committed file
+    (written,) = make_action_demos(env, out_dir=tmp_path / "new")
+    assert written == tmp_path / "new" / f"{demo_set}_actions.npz"
+    actions = np.load(written)["acts"]
+    np.testing.assert_allclose(actions, np.load(ACTION_DEMO_DIR / f"{demo_set}_actions.npz")["acts"], atol=1e-4)
+    assert np.abs(actions).max() <= 1.0
+
+
 def test_observation_only_transitions_pair_consecutive_states():
     from stable_baselines3.common.env_util import make_vec_env
 

@@ -204,9 +204,17 @@ def test_goal_frame_features_are_the_same_for_the_same_approach_to_any_goal():
     assert without_velocity(th.tensor([towards_north], dtype=th.float32)).shape == (1, 4)
 
 
+def test_goal_frame_features_of_a_goal_without_heading_are_the_offset_from_it_and_the_velocity():
+    # the point maze's state [x, y, vx, vy, goal_x, goal_y]: the same approach to two goals looks the same
+    features = FeatureMap.wrap({"goal_frame": dict(position=[0, 1], goal_position=[4, 5], velocity=[2, 3])})
+    states = th.tensor([[1.0, 2.0, 0.5, -0.5, 1.5, 1.0], [-1.5, 0.0, 0.5, -0.5, -1.0, -1.0]])
+    assert th.allclose(features(states), th.tensor([[-0.5, 1.0, 0.5, -0.5], [-0.5, 1.0, 0.5, -0.5]]))
+
+
 @pytest.mark.parametrize(
     "settings, message",
     [
+        (dict(PARKING_GOAL_FRAME, heading=None), r"both heading and goal_heading .* or neither"),
         (dict(PARKING_GOAL_FRAME, position=[0]), r"two state indices for each of \['position'\]"),
         (dict(PARKING_GOAL_FRAME, position_scale=0), r"position_scale'\] must be a number > 0"),
         (dict(PARKING_GOAL_FRAME, goal_heading=[10, 12]), r"goal_frame'\]\['goal_heading'\] holds state indices \[12\]"),

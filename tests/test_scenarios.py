@@ -8,7 +8,7 @@ import pytest
 
 from sb3_mpail import MPAIL
 from sb3_mpail.mppi.constraints import RectangleObstacles
-from sb3_mpail.mppi.costs import FeatureSelection
+from sb3_mpail.mppi.costs import FeatureSelection, GoalFrameFeatures
 from sb3_mpail.mppi.dynamics import LearnedDynamics, PointMassDynamics
 from sb3_mpail.mppi.highway_dynamics import HighwayKinematics, RacetrackKinematics
 
@@ -67,6 +67,7 @@ def test_point_maze_trains_with_the_shipped_zoo_entry_planning_through_the_point
     model = zoo_train("sb3_mpail/PointMaze-v0", 400, tmp_path)
     assert isinstance(model.policy.dynamics, PointMassDynamics)
     assert isinstance(model.policy.planner.constraint_cost, RectangleObstacles)
-    # the discriminator sees the ball's position and velocity; the value also sees the goal
-    assert model.policy.discriminator_features.indices.tolist() == [0, 1, 2, 3]
+    # the discriminator sees the ball from the goal (its offset and velocity); the value the whole state
+    assert isinstance(model.policy.discriminator_features, GoalFrameFeatures)
+    assert model.policy.discriminator_features.indices == {"position": [0, 1], "goal_position": [4, 5], "velocity": [2, 3]}
     assert model.policy.value_net[0].in_features == 6

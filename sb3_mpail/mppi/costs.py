@@ -240,33 +240,42 @@ class IndexPairFeatures(nn.Module):
 
 class GoalFrameFeatures(IndexPairFeatures):
     """
-    A goal-conditioned vehicle's state seen from its goal: the position and velocity in the goal's frame (along and
-    across the goal's heading) and the heading relative to the goal's, as cosine and sine. Demos that end at different
-    goals (parking slots) then all look alike, and a discriminator learns one approach rather than one per goal.
+    A goal-conditioned state seen from its goal: the position and velocity in the goal's frame (along and across the
+    goal's heading) and the heading relative to the goal's, as cosine and sine; for a goal without a heading (a point
+    to reach), the offset from the goal and the velocity in the world's axes. Demos that end at different goals
+    (parking slots, a maze's goal cell with its noise) then all look alike, and a discriminator learns one approach
+    rather than one per goal.
 
     :param position: the state indices of the position ``(x, y)``
-    :param heading: the indices of the heading's ``(cos, sin)``
     :param goal_position: the indices of the goal's position
+    :param heading: the indices of the heading's ``(cos, sin)``; ``None`` (with ``goal_heading``): a goal without one
     :param goal_heading: the indices of the goal heading's ``(cos, sin)``
     :param velocity: the indices of the velocity ``(vx, vy)`` (in the world frame); ``None``: no velocity features
     :param position_scale: factor on the position features (e.g. 10 where a 5 m offset is 0.05 state units: a
         spectral-normed discriminator's slope bound otherwise lets it barely tell such offsets apart)
     :param name: the setting it was given as, which error messages name
+    :raises ValueError: only one of ``heading`` and ``goal_heading`` is given
     """
 
     def __init__(
         self,
         position: Sequence[int],
-        heading: Sequence[int],
         goal_position: Sequence[int],
-        goal_heading: Sequence[int],
+        heading: Sequence[int] | None = None,
+        goal_heading: Sequence[int] | None = None,
         velocity: Sequence[int] | None = None,
         position_scale: float = 1.0,
         name: str = "goal_frame",
     ):
-        pairs = dict(position=position, heading=heading, goal_position=goal_position, goal_heading=goal_heading)
-        if velocity is not None:
-            pairs["velocity"] = velocity
+        if (heading is None) != (goal_heading is None):
+            raise ValueError(
+                f"{name} takes both heading and goal_heading (a goal with a heading) or neither (a point to reach); "
+                f"got heading={heading!r}, goal_heading={goal_heading!r}."
+            )
+        pairs = dict(position=position, goal_position=goal_position)
+        for key, indices in dict(heading=heading, goal_heading=goal_heading, velocity=velocity).items():
+            if indices is not None:
+                pairs[key] = indices
         super().__init__(pairs, dict(position_scale=position_scale), name)
         self.position_scale = float(position_scale)
 
@@ -276,7 +285,10 @@ class GoalFrameFeatures(IndexPairFeatures):
             return states[:, first], states[:, second]
 
         (x, y), (goal_x, goal_y) = pair("position"), pair("goal_position")
-        (cos, sin), (goal_cos, goal_sin) = pair("heading"), pair("goal_heading")
+        if "heading" in self.indices:
+            (cos, sin), (goal_cos, goal_sin) = pair("heading"), pair("goal_heading")
+        else:  # the world's axes
+            goal_cos, goal_sin = th.ones_like(goal_x), th.zeros_like(goal_x)
 
         def in_goal_frame(dx: th.Tensor, dy: th.Tensor) -> List[th.Tensor]:
             return [dx * goal_cos + dy * goal_sin, dy * goal_cos - dx * goal_sin]
@@ -284,7 +296,8 @@ class GoalFrameFeatures(IndexPairFeatures):
         columns = [self.position_scale * column for column in in_goal_frame(x - goal_x, y - goal_y)]
         if "velocity" in self.indices:
             columns += in_goal_frame(*pair("velocity"))
-        columns += [cos * goal_cos + sin * goal_sin, sin * goal_cos - cos * goal_sin]
+        if "heading" in self.indices:
+            columns += [cos * goal_cos + sin * goal_sin, sin * goal_cos - cos * goal_sin]
         return th.stack(columns, dim=1)
 
 
