@@ -147,6 +147,14 @@ VARIANTS: Dict[str, Variant] = {
         "5 discriminators, the cost their mean logit alone (no disagreement term: does the averaging or the penalty help?)",
         lambda: dict(discriminator_ensemble_size=5, discriminator_disagreement=0.0),
     ),
+    "discriminator-ensemble-10": Variant(
+        "10 discriminators, the cost their mean logit less their standard deviation (does a larger ensemble help more?)",
+        lambda: dict(discriminator_ensemble_size=10, discriminator_disagreement=1.0),
+    ),
+    "discriminator-ensemble-standardised": Variant(
+        "both: the 5-discriminator ensemble with its disagreement term and the standardised inputs",
+        lambda: dict(standardised_headings(), discriminator_ensemble_size=5, discriminator_disagreement=1.0),
+    ),
     "gradient-penalty": Variant(
         "a gradient penalty on the discriminator (weight 10, WGAN-GP's, between expert and agent) beside spectral norm",
         algorithm_kwargs=dict(discriminator_gradient_penalty=10.0),
