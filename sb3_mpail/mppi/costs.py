@@ -287,10 +287,10 @@ class GoalFrameFeatures(IndexPairFeatures):
         (x, y), (goal_x, goal_y) = pair("position"), pair("goal_position")
         if "heading" in self.indices:
             (cos, sin), (goal_cos, goal_sin) = pair("heading"), pair("goal_heading")
-        else:  # the world's axes
-            goal_cos, goal_sin = th.ones_like(goal_x), th.zeros_like(goal_x)
 
         def in_goal_frame(dx: th.Tensor, dy: th.Tensor) -> List[th.Tensor]:
+            if "heading" not in self.indices:  # a goal without heading: the world's axes
+                return [dx, dy]
             return [dx * goal_cos + dy * goal_sin, dy * goal_cos - dx * goal_sin]
 
         columns = [self.position_scale * column for column in in_goal_frame(x - goal_x, y - goal_y)]
