@@ -1,6 +1,6 @@
 """Generate observation-only expert demonstrations for gymnasium's MuJoCo locomotion tasks (``Hopper-v4``,
-``Walker2d-v4``, ``HalfCheetah-v4``; stock rewards, terminations and 1,000-step episodes; the v4 versions are the
-ones both supported gymnasium releases register).
+``Walker2d-v4``, ``HalfCheetah-v4``, ``Ant-v4``; stock rewards, terminations and 1,000-step episodes; the v4 versions
+are the ones both supported gymnasium releases register).
 
 This script:
 

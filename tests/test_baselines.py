@@ -145,6 +145,26 @@ def test_scripted_experts_action_demos_replay_through_the_shipped_observations(t
     assert np.abs(actions).max() <= 1.0
 
 
+def test_a_mujoco_expert_checked_on_each_demos_first_step_labels_the_shipped_observations(tmp_path):
+    pytest.importorskip("mujoco", reason="the MuJoCo tasks need mujoco (the scenarios extra)")
+    expert = Path(__file__).parents[1] / "benchmarks" / "experts" / "halfcheetah_td3.zip"
+    (written,) = make_action_demos("halfcheetah", expert_path=expert, out_dir=tmp_path)
+    with np.load(written) as labelled, np.load(ACTION_DEMO_DIR / "halfcheetah_16_actions.npz") as committed:
+        np.testing.assert_array_equal(labelled["obs"], committed["obs"])
+        np.testing.assert_allclose(labelled["acts"], committed["acts"], atol=1e-4)
+
+
+def test_a_mujoco_expert_that_did_not_make_the_demos_is_refused(tmp_path):
+    pytest.importorskip("mujoco", reason="the MuJoCo tasks need mujoco (the scenarios extra)")
+    from stable_baselines3 import TD3
+
+    untrained = tmp_path / "untrained_td3.zip"
+    TD3("MlpPolicy", "HalfCheetah-v4", seed=0, device="cpu").save(untrained)
+    with pytest.raises(RuntimeError, match="do not reproduce halfcheetah_16"):
+        make_action_demos("halfcheetah", expert_path=untrained, out_dir=tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
 def test_observation_only_transitions_pair_consecutive_states():
     from stable_baselines3.common.env_util import make_vec_env
 

@@ -1,7 +1,7 @@
 """
-gymnasium's MuJoCo locomotion tasks as MPAIL-OM meets them: stock ``Hopper-v4``, ``Walker2d-v4`` and
-``HalfCheetah-v4`` (their own rewards, terminations and 1,000-step episodes; v4 is the version both supported
-gymnasium releases register), scored by return and forward speed. MuJoCo is the ``scenarios`` extra.
+gymnasium's MuJoCo locomotion tasks as MPAIL-OM meets them: stock ``Hopper-v4``, ``Walker2d-v4``,
+``HalfCheetah-v4`` and ``Ant-v4`` (their own rewards, terminations and 1,000-step episodes; v4 is the version both
+supported gymnasium releases register), scored by return and forward speed. MuJoCo is the ``scenarios`` extra.
 """
 
 from typing import Any, Dict, List, Optional
@@ -11,7 +11,8 @@ import numpy as np
 from sb3_mpail.evaluation import evaluate_episodes
 
 #: the locomotion tasks and the name of their shipped demo set (``sb3_mpail/data/<name>_<n>.npz`` and ``<name>.json``)
-LOCOMOTION_TASKS = {"Hopper-v4": "hopper", "Walker2d-v4": "walker2d", "HalfCheetah-v4": "halfcheetah"}
+#: (``ant`` is the 200-step ``sb3_mpail/Ant-v0``'s set, hence ``ant_v4``)
+LOCOMOTION_TASKS = {"Hopper-v4": "hopper", "Walker2d-v4": "walker2d", "HalfCheetah-v4": "halfcheetah", "Ant-v4": "ant_v4"}
 
 
 def evaluate_locomotion(
