@@ -91,6 +91,9 @@ ENV_NAMES: Dict[str, str] = {
     "sb3_mpail/NavigationLap-v0": "lap",
     "sb3_mpail/HighwayTraffic-v0": "highway_traffic",
     "sb3_mpail/PointMaze-v0": "pointmaze",
+    "sb3_mpail/Racetrack-v0": "racetrack",
+    "sb3_mpail/Highway-v0": "highway",
+    "sb3_mpail/Parking-v0": "parking",
     **LOCOMOTION_TASKS,
 }
 #: keys of a config entry that are strings of Python expressions (rl_zoo3 evaluates ``policy_kwargs`` this way)
@@ -666,7 +669,7 @@ def _demo_script(name: str) -> Any:
 
 
 #: the shipped sets whose expert is replayed from the demos' reset seeds, besides the MuJoCo tasks' (:func:`_demo_experts`)
-REPLAYED_EXPERTS = ("navigation", "highway_traffic", "pointmaze")
+REPLAYED_EXPERTS = ("navigation", "highway_traffic", "pointmaze", "racetrack", "highway")
 
 
 def _demo_experts(
@@ -686,6 +689,11 @@ def _demo_experts(
         expert = _demo_script("make_maze_demos").MazeGraphExpert(env)
         first_seed = _demo_script("expert_rollouts").DEMO_SEED_OFFSET
         return [(first_seed + i, expert.action) for i in range(n_episodes)]
+    if name in ("racetrack", "highway"):  # stateless: highway-env's lane (and speed) control of the observed car
+        script = _demo_script("make_racetrack_demos")
+        driver = script.LaneKeepingDriver(script.SCENARIOS[name])
+        first_seed = _demo_script("expert_rollouts").DEMO_SEED_OFFSET
+        return [(first_seed + i, driver.act) for i in range(n_episodes)]
     # highway_traffic: a fresh driver per episode (its lane-change timer is state); the crashed episodes' seeds skipped
     script = _demo_script("make_highway_traffic_demos")
     failed = set(shipped_demo_info(name)["failed_demo_seeds"])
@@ -761,11 +769,12 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
     script retrains the same expert bit for bit on this stack) from the demos' start seeds. Pendulum and cartpole:
     the actions are recovered from the shipped observations by inverting the env's known dynamics
     (:func:`pendulum_actions`, :func:`cartpole_actions`), so no expert is needed; every step is checked against the
-    exact model. Highway in traffic and the point maze: replays the scripted expert of
-    ``demos/make_highway_traffic_demos.py`` (highway-env's IDM/MOBIL driver) or ``demos/make_maze_demos.py`` from the
-    demos' reset seeds.
+    exact model. Highway in traffic, the point maze, the racetrack and the highway without traffic: replays the scripted
+    expert of ``demos/make_highway_traffic_demos.py`` (highway-env's IDM/MOBIL driver), ``demos/make_maze_demos.py`` or
+    ``demos/make_racetrack_demos.py`` (highway-env's lane keeping) from the demos' reset seeds.
 
-    :param env: ``navigation``, ``pendulum``, ``cartpole``, ``highway_traffic``, ``pointmaze`` or a MuJoCo task's name
+    :param env: ``navigation``, ``pendulum``, ``cartpole``, ``highway_traffic``, ``pointmaze``, ``racetrack``,
+        ``highway`` or a MuJoCo task's name
     :param expert_path: the navigation or MuJoCo expert
     :param out_dir: where the files go
     :raises RuntimeError: the actions do not reproduce a shipped demo

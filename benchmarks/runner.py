@@ -178,7 +178,8 @@ def train_job(job: Dict[str, Any], options: Dict[str, Any]) -> Dict[Path, Dict[s
 
     :param job: an entry of :func:`make_jobs`
     :param options: ``results_dir``, ``config_dir`` (``None``: the default files), ``eval_episodes``,
-        ``ood_episodes``, ``eval_every`` (0: a tenth of the budget), ``timesteps`` (``None``: the configs'), ``threads``
+        ``ood_episodes``, ``eval_every`` (0: a tenth of the budget), ``timesteps`` (``None``: the configs'), ``threads``,
+        and ``command``, the command line recorded with the results (optional)
     :return: each of its algorithms' result, by the file it goes to (:func:`job_paths`)
     """
     env_id, algos, n_demos, seed = job["env_id"], job["algos"], job["n_demos"], job["seed"]
@@ -206,6 +207,7 @@ def train_job(job: Dict[str, Any], options: Dict[str, Any]) -> Dict[Path, Dict[s
         result: Dict[str, Any] = dict(
             env_id=env_id, algo=name, n_demos=n_demos, seed=seed, n_timesteps=budget, curve=curves[name],
             train_seconds=round(seconds, 1), shared_run=list(algos), hyperparams=hyperparams, machine=machine_description(),
+            command=options.get("command"),
         )  # fmt: skip
         if env_id == LAP:
             result["lap"] = dict(zip(LAP_FIGURES, curves[name][-1][1:]))
@@ -794,7 +796,7 @@ def write_report(
                       f"({scenario[1].n_eval_episodes} episodes per seed); mean ± 95% CI over seeds:", "", table,
                       ""]  # fmt: skip
         lines += [""] + [f"![{env_id}](benchmarks/figures/{figure.name})" for figure in figures if figure is not None]
-        lines += ["", f"Command: `{command}` on {machines_of(results)}."]
+        lines += ["", f"{command_line(results, command)} on {machines_of(results)}."]
         write_section(f"baselines-{name}", "\n".join(lines), report_file)
         if env_id == NAVIGATION and any("ood" in r for r in results):
             n_ood = 4 if 4 in grid_demos else grid_demos[0]
@@ -820,8 +822,21 @@ def write_report(
             ]
             if figure is not None:
                 ood.append(f"![final positions](benchmarks/figures/{figure.name})")
-            ood += ["", f"Command: `{command}`."]
+            ood += ["", f"{command_line([r for r in results if 'ood' in r], command)}."]
             write_section(f"baselines-{name}-ood", "\n".join(ood), report_file)
+
+
+def command_line(results: List[Dict[str, Any]], command: str) -> str:
+    """
+    The commands that made a grid's results, in the order they first appear: each result records its own, so a
+    section that several runs of the runner filled quotes them all.
+
+    :param results: :func:`load_results`'s
+    :param command: this invocation's command, quoted for results that predate the record
+    :return: ``Command: `...``` or ``Commands: `...`; `...```
+    """
+    commands = list(dict.fromkeys(result.get("command") or command for result in results)) or [command]
+    return ("Command: " if len(commands) == 1 else "Commands: ") + "; ".join(f"`{c}`" for c in commands)
 
 
 def lap_report(
@@ -860,7 +875,7 @@ def lap_report(
         "",
         lap_table(results, algos, demos, n_seeds, scenario_mpail),
         "",
-        f"Command: `{command}` on {machines_of(results)}.",
+        f"{command_line(results, command)} on {machines_of(results)}.",
     ])  # fmt: skip
 
 
@@ -898,14 +913,15 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     options = dict(results_dir=args.results_dir, config_dir=args.config_dir, eval_episodes=args.eval_episodes,
                    eval_every=args.eval_every, ood_episodes=args.ood_episodes, timesteps=args.timesteps,
                    threads=args.threads)  # fmt: skip
-    if not args.report_only:
-        run_grid(make_jobs(args.envs, args.algos, args.demos, range(args.seeds)), options, args.workers, args.ray_address)
     command = "python -m benchmarks.runner " + " ".join(
         [f"--envs {' '.join(args.envs)}", f"--algos {' '.join(args.algos)}", f"--demos {' '.join(map(str, args.demos))}",
          f"--seeds {args.seeds}"]
         + ([f"--timesteps {args.timesteps}"] if args.timesteps is not None else [])
         + ([f"--eval-every {args.eval_every}"] if args.eval_every else [])
     )  # fmt: skip
+    if not args.report_only:
+        jobs = make_jobs(args.envs, args.algos, args.demos, range(args.seeds))
+        run_grid(jobs, options | dict(command=command), args.workers, args.ray_address)
     write_report(args.results_dir, args.envs, args.algos, args.demos, args.seeds, command, args.timesteps, args.report_file,
                  args.figures_dir)  # fmt: skip
 

@@ -59,8 +59,11 @@ def test_every_algorithm_s_config_is_in_zoo_configs_and_mpail_s_is_the_shipped_f
     assert config_path("mpail").samefile(HYPERPARAMS)  # a link: no second copy to drift
 
 
-@pytest.mark.parametrize("algo", ALGOS)
-@pytest.mark.parametrize("env_id", ENVS)
+#: every entry of every algorithm's file
+CONFIG_ENTRIES = [(algo, env_id) for algo in ALGOS for env_id in yaml.safe_load(config_path(algo).read_text())]
+
+
+@pytest.mark.parametrize("algo, env_id", CONFIG_ENTRIES)
 def test_every_config_has_the_zoo_keys_and_mpail_s_budget(algo, env_id):
     entry = load_config(algo, env_id)
     assert {"n_timesteps", "n_envs", "policy", "policy_kwargs", "demos"} <= set(entry)
@@ -134,10 +137,14 @@ def test_action_demos_match_the_shipped_observation_only_demos(tmp_path):
     np.testing.assert_array_equal(hopper.next_obs[: len(episodes[0]) - 1], episodes[0][1:])
 
 
-@pytest.mark.parametrize("env, demo_set", [("highway_traffic", "highway_traffic_16"), ("pointmaze", "pointmaze_4")])
+@pytest.mark.parametrize(
+    "env, demo_set",
+    [("highway_traffic", "highway_traffic_16"), ("pointmaze", "pointmaze_4"), ("racetrack", "racetrack_4"),
+     ("highway", "highway_4")],  # fmt: skip
+)
 def test_scripted_experts_action_demos_replay_through_the_shipped_observations(tmp_path, env, demo_set):
-    # highway-env's IDM/MOBIL driver and the maze's graph expert, replayed from the demos' reset seeds, reproduce every
-    # shipped observation (make_action_demos checks it) with the actions of the committed file
+    # highway-env's IDM/MOBIL driver and lane keeping and the maze's graph expert, replayed from the demos' reset seeds,
+    # reproduce every shipped observation (make_action_demos checks it) with the actions of the committed file
     (written,) = make_action_demos(env, out_dir=tmp_path / "new")
     assert written == tmp_path / "new" / f"{demo_set}_actions.npz"
     actions = np.load(written)["acts"]

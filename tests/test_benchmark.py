@@ -79,6 +79,18 @@ def test_a_second_invocation_trains_nothing(tmp_path, monkeypatch, capsys):
     assert "<!-- baselines-pendulum_5steps:start -->" in (tmp_path / "B.md").read_text()
 
 
+def test_a_section_filled_by_two_invocations_quotes_both_commands(tmp_path):
+    configs, results, report = tiny_configs(tmp_path / "configs"), tmp_path / "results", tmp_path / "B.md"
+    arguments = ["--envs", "pendulum", "--algos", "bc", "--demos", "4", "--seeds", "1", "--config-dir", str(configs),
+                 "--results-dir", str(results), "--report-file", str(report), "--figures-dir", str(tmp_path / "figures"),
+                 "--eval-episodes", "2"]  # fmt: skip
+    main(arguments)
+    main([*arguments[:7], "2", *arguments[8:]])  # runs seed 1 only
+    first, second = ("python -m benchmarks.runner --envs pendulum --algos bc --demos 4 --seeds " + n for n in "12")
+    assert json.loads((results / "pendulum" / "bc_4demos_seed0.json").read_text())["command"] == first
+    assert f"Commands: `{first}`; `{second}` on " in report.read_text()
+
+
 def test_ray_is_optional_and_named_when_missing(tmp_path, monkeypatch):
     import builtins
 
