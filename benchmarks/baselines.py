@@ -33,7 +33,7 @@ import importlib.util
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import gymnasium as gym
 import numpy as np
@@ -380,10 +380,12 @@ def make_adversarial(algo: str, env: VecEnv, demos: DemoSource, seed: int, hyper
     features = net_kwargs.get("features")
     if features is not None and algo != "gail":
         raise ValueError("Only GAIL's discriminator can read features of the state (reward_net_kwargs features).")
-    if hyperparams.get("demos_are_features") and not (isinstance(features, Sequence) and not isinstance(features, str)):
-        raise ValueError("demos_are_features needs reward_net_kwargs features to list the state dimensions the demos hold; "
-                         f"got {features!r}.")  # fmt: skip
-    demo_features = features if hyperparams.get("demos_are_features") else None
+    # demos that hold features hold state dimensions: the features' list, or the first map of a chain
+    held = features["chain"][0] if isinstance(features, Mapping) and set(features) == {"chain"} else features
+    if hyperparams.get("demos_are_features") and not (isinstance(held, Sequence) and not isinstance(held, str)):
+        raise ValueError("demos_are_features needs reward_net_kwargs features to list the state dimensions the demos hold "
+                         f"(or a chain that starts with that list); got {features!r}.")  # fmt: skip
+    demo_features = held if hyperparams.get("demos_are_features") else None
     transitions = observation_only_transitions(demos, env, demo_features)
     ppo_kwargs = {key: value for key, value in hyperparams.items() if key not in ADVERSARIAL_KEYS}
     generator = PPO(ppo_kwargs.pop("policy", "MlpPolicy"), env, seed=seed, device="cpu", verbose=0, **ppo_kwargs)

@@ -84,8 +84,9 @@ class MPAIL(BaseAlgorithm):
     :param env: env id, ``gym.Env`` or ``VecEnv`` (``None`` only when loading)
     :param demos: observation-only expert demos (see :func:`~sb3_mpail.demos.load_demos`); needed to train, not to plan
     :param demos_are_features: the demos hold what the discriminator sees (the policy's ``discriminator_features``,
-        e.g. a partially observed demo), not full observations. ``False``: demos are observations and pass through
-        the same feature map as the agent's states
+        e.g. a partially observed demo; for a chain of maps, what its first map gives, the later maps applied to
+        them), not full observations. ``False``: demos are observations and pass through the same feature map as the
+        agent's states
     :param n_steps: env steps per env per iteration
     :param gamma: discount of the learned reward in the value targets
     :param gae_lambda: GAE lambda of the value targets
@@ -361,7 +362,11 @@ class MPAIL(BaseAlgorithm):
                     "standardise_inputs fits its statistics to demo observations, but demos_are_features=True gives "
                     "features: pass observation demos, or standardise inside your discriminator_features map."
                 )
-            self.expert = load_demos(demos, self.policy.feature_space, "the discriminator's feature space")
+            expert = load_demos(demos, self.policy.demo_feature_space, "the discriminator's feature space")
+            with th.no_grad():
+                self.expert = ExpertTransitions(
+                    *(self.policy.features_of_demo_features(self._tensor(array)).cpu().numpy() for array in expert)
+                )
             return
         expert = load_demos(demos, self.observation_space)
         self.policy.fit_input_statistics(self._tensor(np.concatenate([expert.observations, expert.next_observations])))

@@ -26,6 +26,7 @@ from sb3_mpail.checks import (
 from sb3_mpail.mppi.constraints import make_constraint_cost
 from sb3_mpail.mppi.costs import (
     REWARD_FORMS,
+    FeatureChain,
     FeatureMap,
     FeatureSpec,
     MappedNetwork,
@@ -108,8 +109,9 @@ class MPPIPolicy(BasePolicy):
     :param discriminator_features: what the discriminator sees of a state: a fixed map ``features(states) ->
         (batch, n_features)`` on ``(batch, state_dim)`` tensors (an ``nn.Module``, a picklable function, a list of
         the state indices kept, ``{"angles": [indices]}`` for :class:`~sb3_mpail.mppi.costs.AngleFeatures`,
-        ``{"goal_frame": {...}}`` for :class:`~sb3_mpail.mppi.costs.GoalFrameFeatures` or ``{"lane_frame": {...}}``
-        for :class:`~sb3_mpail.mppi.costs.LaneFrameFeatures`),
+        ``{"goal_frame": {...}}`` for :class:`~sb3_mpail.mppi.costs.GoalFrameFeatures`, ``{"lane_frame": {...}}``
+        for :class:`~sb3_mpail.mppi.costs.LaneFrameFeatures`, or ``{"chain": [map, map, ...]}`` for maps applied in
+        turn, :class:`~sb3_mpail.mppi.costs.FeatureChain`),
         applied to ``s`` and ``s'`` before the discriminator, which is built on ``n_features`` inputs. The planner and
         the dynamics still use the full state. ``None``: the full observation. Its parameters, if any, are saved
         but not trained. Functions are saved with cloudpickle (module-level functions by reference, so their
@@ -258,10 +260,14 @@ class MPPIPolicy(BasePolicy):
         )
         self.reward_form = reward_form
         self.discriminator_features: nn.Module | None = None
-        self.feature_space = observation_space
+        self.feature_space = self.demo_feature_space = observation_space
         if discriminator_features is not None:
             self.discriminator_features = FeatureMap.wrap(discriminator_features, "discriminator_features")
             self.feature_space = FeatureMap.space(self.discriminator_features, observation_space, "discriminator_features")
+            # demos that hold features hold a chain's first map's: the later maps are applied to them
+            self.demo_feature_space = self.feature_space
+            if isinstance(self.discriminator_features, FeatureChain):
+                self.demo_feature_space = FeatureMap.space(self.discriminator_features[0], observation_space)
         if standardise_inputs:
             n_features = self.feature_space.shape[0]
             self.discriminator_features = StandardisedFeatures(self.discriminator_features, n_features, min_input_scale)
@@ -334,6 +340,15 @@ class MPPIPolicy(BasePolicy):
     def features(self, states: th.Tensor) -> th.Tensor:
         """What the discriminator sees of ``(batch, state_dim)`` states: ``discriminator_features`` or the states."""
         return states if self.discriminator_features is None else self.discriminator_features(states)
+
+    def features_of_demo_features(self, demo_features: th.Tensor) -> th.Tensor:
+        """
+        What the discriminator sees of demos that hold features (``demos_are_features``, in ``demo_feature_space``):
+        themselves, or, for a :class:`~sb3_mpail.mppi.costs.FeatureChain`, the chain's later maps of them.
+        """
+        if isinstance(self.discriminator_features, FeatureChain):
+            return self.discriminator_features[1:](demo_features)
+        return demo_features
 
     def seed(self, seed: int | None) -> None:
         """

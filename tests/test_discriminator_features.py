@@ -269,6 +269,50 @@ def test_lane_frame_grid_lookup_finds_the_nearest_segment_near_the_road_as_measu
     assert th.allclose(features(states)[near, 0], lateral[near], atol=1e-5)
 
 
+def test_lane_frame_features_without_a_heading_give_the_offset_and_pass_on_the_dimensions_kept():
+    squares = [np.array([[-r, -r], [r, -r], [r, r], [-r, r], [-r, -r]]) for r in (10.0, 10.5)]
+    features = LaneFrameFeatures(squares, position=[0, 1], keep=[3, 2], lateral_scale=10.0, cell_size=0.25)
+    states = th.tensor([[0.0, -10.05, 7.0, 8.0], [10.1, 3.0, -1.0, 2.0]])  # 0.05 and 0.1 right of the inner lane
+    assert th.allclose(features(states), th.tensor([[-0.5, 8.0, 7.0], [-1.0, 2.0, -1.0]]), atol=1e-5)
+
+
+def test_a_chain_applies_its_maps_in_turn_and_feature_demos_pass_through_its_later_maps(demo_observations):
+    chain = {"chain": [[2, 0, 1], [1, 2]]}  # the demos hold (thdot, cos, sin); the discriminator sees (cos, sin)
+    partial = [episode[:, [2, 0, 1]] for episode in demo_observations]
+    model = make_model(trajectories(partial), features=chain, demos_are_features=True).learn(32)
+    assert model.policy.feature_space.shape == (2,) and model.policy.demo_feature_space.shape == (3,)
+    states = th.as_tensor(demo_observations[0])
+    assert th.equal(model.policy.features(states), states[:, :2])
+    expected = np.concatenate([episode[:-1, :2] for episode in demo_observations])
+    np.testing.assert_array_equal(model.expert.observations, expected)
+    with pytest.raises(ValueError, match=r"shape \(2,\) but the discriminator's feature space has shape \(3,\)"):
+        make_model(trajectories([episode[:, :2] for episode in demo_observations]), features=chain, demos_are_features=True)
+
+
+@pytest.mark.parametrize(
+    "chain, message",
+    [
+        ([[0, 1]], r"discriminator_features\['chain'\] must be a list of two or more feature maps"),
+        ("01", r"discriminator_features\['chain'\] must be a list of two or more feature maps"),
+        ([[0, 2], [2]], r"discriminator_features\['chain'\]\[1\] holds state indices \[2\] out of range for the 2-D state"),
+    ],
+)
+def test_bad_chains_are_refused_naming_the_map(chain, message):
+    with pytest.raises(ValueError, match=message):
+        features = FeatureMap.wrap({"chain": chain}, "discriminator_features")
+        FeatureMap.space(features, spaces.Box(-1, 1, (3,)), "discriminator_features")
+
+
+def test_the_lap_demo_path_is_its_recorded_positions_closed_into_a_loop():
+    from sb3_mpail.demos import shipped_demos
+
+    positions = shipped_demos("lap", 1)[0].obs[:, :2]
+    features = LaneFrameFeatures("lap_demo", position=[0, 1])
+    assert th.allclose(features(th.as_tensor(positions)), th.zeros(len(positions), 1), atol=1e-5)
+    # the track is a circle through the origin centred at (0, 3.82 m): its centre is about a radius off the path
+    assert features(th.tensor([[0.0, 3.82]])).abs().item() == pytest.approx(3.82, abs=0.3)
+
+
 @pytest.mark.parametrize(
     "settings, message",
     [
@@ -278,6 +322,8 @@ def test_lane_frame_grid_lookup_finds_the_nearest_segment_near_the_road_as_measu
         (dict(lateral_scale=-1), r"lateral_scale'\] must be a number > 0"),
         (dict(cell_size=0), r"cell_size'\] must be a number > 0"),
         (dict(heading=[4, 6]), r"lane_frame'\]\['heading'\] holds state indices \[6\]"),
+        (dict(keep=[7]), r"lane_frame'\]\['keep'\] holds state indices \[7\]"),
+        (dict(keep=[]), r"lane_frame'\]\['keep'\] must be a non-empty list of state indices"),
     ],
 )
 def test_bad_lane_frame_settings_are_refused_naming_them(settings, message):

@@ -8,7 +8,7 @@ import pytest
 
 from sb3_mpail import MPAIL
 from sb3_mpail.mppi.constraints import RectangleObstacles
-from sb3_mpail.mppi.costs import FeatureSelection, GoalFrameFeatures
+from sb3_mpail.mppi.costs import FeatureSelection, GoalFrameFeatures, LaneFrameFeatures
 from sb3_mpail.mppi.dynamics import LearnedDynamics, PointMassDynamics
 from sb3_mpail.mppi.highway_dynamics import HighwayKinematics, RacetrackKinematics
 
@@ -36,10 +36,13 @@ def test_cartpole_mpail_om_trains_with_the_shipped_zoo_entry(tmp_path):
 def test_lap_from_one_noisy_partial_demo_trains_with_the_shipped_zoo_entry(tmp_path):
     model = zoo_train("sb3_mpail/NavigationLap-v0", 960, tmp_path)
     assert model.demos_are_features
-    # the discriminator sees x, y, vx, vy; the value sees the whole 12-D state
-    assert isinstance(model.policy.discriminator_features, FeatureSelection)
-    assert model.policy.discriminator_features.indices.tolist() == [0, 1, 6, 7]
-    assert model.policy.feature_space.shape == (4,) and model.policy.value_net[0].in_features == 12
+    # the demo holds x, y, vx, vy; the discriminator sees the car from the demo's path (offset, vx, vy); the value sees
+    # the whole 12-D state
+    selection, path_frame = model.policy.discriminator_features
+    assert isinstance(selection, FeatureSelection) and selection.indices.tolist() == [0, 1, 6, 7]
+    assert isinstance(path_frame, LaneFrameFeatures) and path_frame.keep == [2, 3]
+    assert model.policy.demo_feature_space.shape == (4,) and model.policy.feature_space.shape == (3,)
+    assert model.policy.value_net[0].in_features == 12
 
 
 @pytest.mark.parametrize(

@@ -3,6 +3,7 @@
 from sb3_mpail.mppi.costs import (
     AngleFeatures,
     ConcaveValue,
+    FeatureChain,
     GoalFrameFeatures,
     LaneFrameFeatures,
     TerminalValue,
@@ -34,6 +35,7 @@ from sb3_mpail.mppi.sampling import ActionSampler, DeltaSampler, GaussianSampler
 
 __all__ = [
     "AngleFeatures",
+    "FeatureChain",
     "GoalFrameFeatures",
     "LaneFrameFeatures",
     "DEFAULT_DYNAMICS",

@@ -339,7 +339,10 @@ class LaneFrameFeatures(IndexPairFeatures):
     :param centrelines: each lane's centre line in the driving direction, ``(n_points, 2)`` positions in the state's
         units (at least two points each); or the name of a road of :data:`NAMED_LANES`
     :param position: the state indices of the position ``(x, y)``
-    :param heading: the indices of the heading's ``(cos, sin)``
+    :param heading: the indices of the heading's ``(cos, sin)``; ``None``: no heading features (states without one,
+        e.g. a demo of positions and body-frame velocities)
+    :param keep: state indices passed on as they are after the lane-frame features (e.g. body-frame velocities, which
+        no place on the road changes); ``None``: none
     :param lateral_scale: factor on the lateral offset (e.g. 10 where a state unit is 10 m, so that the feature is in
         metres: a spectral-normed discriminator's slope bound otherwise lets it barely tell a lane's centre from its edge)
     :param cell_size: the lookup grid's cell, in the state's units; ``None``: half the median segment's length
@@ -350,12 +353,15 @@ class LaneFrameFeatures(IndexPairFeatures):
         self,
         centrelines: Union[str, Sequence[Any]],
         position: Sequence[int],
-        heading: Sequence[int],
+        heading: Sequence[int] | None = None,
+        keep: Sequence[int] | None = None,
         lateral_scale: float = 1.0,
         cell_size: Optional[float] = None,
         name: str = "lane_frame",
     ):
-        super().__init__(dict(position=position, heading=heading), dict(lateral_scale=lateral_scale), name)
+        pairs = dict(position=position) if heading is None else dict(position=position, heading=heading)
+        super().__init__(pairs, dict(lateral_scale=lateral_scale), name)
+        self.keep = [] if keep is None else _state_indices(keep, f"{name}['keep']")
         if isinstance(centrelines, str):
             if centrelines not in NAMED_LANES:
                 raise ValueError(f"{name}['centrelines'] names no known road: {centrelines!r} is not one of "
@@ -397,8 +403,12 @@ class LaneFrameFeatures(IndexPairFeatures):
         self.register_buffer("grid_origin", th.as_tensor(origin, dtype=th.float32), persistent=False)
         self.register_buffer("grid_candidates", candidates.reshape(int(n_y), int(n_x), -1), persistent=False)
 
+    def check_state_dim(self, state_dim: int, name: str) -> None:
+        super().check_state_dim(state_dim, name)
+        _check_index_range(self.keep, -state_dim, state_dim, f"{self.name}['keep']")
+
     def forward(self, states: th.Tensor) -> th.Tensor:
-        positions, (cos, sin) = states[:, self.indices["position"]], states[:, self.indices["heading"]].unbind(dim=1)
+        positions = states[:, self.indices["position"]]
         n_y, n_x, _ = self.grid_candidates.shape
         cells = ((positions - self.grid_origin) / self.cell_size).long()
         candidates = self.grid_candidates[cells[:, 1].clamp(0, n_y - 1), cells[:, 0].clamp(0, n_x - 1)]  # (batch, k)
@@ -409,10 +419,11 @@ class LaneFrameFeatures(IndexPairFeatures):
         # the distance to the centre line, on the left of the lane's direction > 0 (round a bend's outside, segments
         # equally near agree on it, where the distances to their lines would differ)
         side = th.sign(direction[:, 0] * offset[:, 1] - direction[:, 1] * offset[:, 0])
-        lateral = side * squared_distance.sqrt()
-        relative_cos = cos * direction[:, 0] + sin * direction[:, 1]
-        relative_sin = sin * direction[:, 0] - cos * direction[:, 1]
-        return th.stack((self.lateral_scale * lateral, relative_cos, relative_sin), dim=1)
+        columns = [self.lateral_scale * side * squared_distance.sqrt()]
+        if "heading" in self.indices:
+            cos, sin = states[:, self.indices["heading"]].unbind(dim=1)
+            columns += [cos * direction[:, 0] + sin * direction[:, 1], sin * direction[:, 0] - cos * direction[:, 1]]
+        return th.cat([th.stack(columns, dim=1), states[:, self.keep]], dim=1)
 
 
 def highway_env_lane_centrelines(env: Any, position_scale: float = 1.0, spacing: float = 2.0) -> List[np.ndarray]:
@@ -450,8 +461,36 @@ def racetrack_lanes() -> List[np.ndarray]:
     return lines
 
 
+def lap_demo_path() -> List[np.ndarray]:
+    """
+    The path of ``sb3_mpail/NavigationLap-v0``'s shipped demo (``lap_1``): its recorded positions, noise and all,
+    closed into a loop; a car that keeps to it drives the demo's lap, wherever on the lap it is.
+    """
+    from sb3_mpail.demos import shipped_demos  # the demos module reads files only; imported here, where it is needed
+
+    positions = shipped_demos("lap", 1)[0].obs[:, :2]
+    return [np.concatenate([positions, positions[:1]])]
+
+
 #: roads by the name a ``lane_frame`` setting's ``centrelines`` (a YAML file's, say) can give
-NAMED_LANES: Dict[str, Callable[[], List[np.ndarray]]] = {"racetrack": racetrack_lanes}
+NAMED_LANES: Dict[str, Callable[[], List[np.ndarray]]] = {"racetrack": racetrack_lanes, "lap_demo": lap_demo_path}
+
+
+class FeatureChain(nn.Sequential):
+    """
+    Feature maps applied one after the other, e.g. the state dimensions a partial demo holds, then a lane frame of
+    those. With ``demos_are_features``, the demos hold what the first map gives and pass through the others.
+
+    :param maps: the maps, first applied first
+    """
+
+    def check_state_dim(self, state_dim: int, name: str) -> None:
+        """Refuses indices out of range of what each map receives: ``state_dim``-D states, then its predecessor's output."""
+        for index, features in enumerate(self):
+            if isinstance(features, (FeatureSelection, AngleFeatures, IndexPairFeatures)):
+                features.check_state_dim(state_dim, f"{name}['chain'][{index}]")
+            with th.no_grad():
+                state_dim = features(th.zeros(2, state_dim)).shape[1]
 
 
 class FeatureMap(nn.Module):
@@ -470,8 +509,8 @@ class FeatureMap(nn.Module):
         """
         The module itself, a :class:`FeatureSelection` of state indices, :class:`AngleFeatures` for ``{"angles":
         [indices]}``, :class:`GoalFrameFeatures` for ``{"goal_frame": {its settings}}``, :class:`LaneFrameFeatures` for
-        ``{"lane_frame": {its settings}}`` (forms a YAML hyperparameter file can hold), or a function wrapped in a
-        :class:`FeatureMap`.
+        ``{"lane_frame": {its settings}}``, a :class:`FeatureChain` for ``{"chain": [map, map, ...]}`` (forms a YAML
+        hyperparameter file can hold), or a function wrapped in a :class:`FeatureMap`.
 
         :param features: the feature map as given
         :param name: the setting it was given as (``discriminator_features`` or ``value_features``), which error
@@ -480,6 +519,11 @@ class FeatureMap(nn.Module):
         if isinstance(features, nn.Module):
             return features
         if isinstance(features, Mapping):
+            if set(features) == {"chain"}:
+                maps = features["chain"]
+                if not (isinstance(maps, Sequence) and not isinstance(maps, str)) or len(maps) < 2:
+                    raise ValueError(f"{name}['chain'] must be a list of two or more feature maps; got {maps!r}.")
+                return FeatureChain(*(cls.wrap(spec, f"{name}['chain'][{i}]") for i, spec in enumerate(maps)))
             if set(features) == {"angles"}:
                 return AngleFeatures(features["angles"], f"{name}['angles']")
             if set(features) == {"goal_frame"} and isinstance(features["goal_frame"], Mapping):
@@ -488,7 +532,8 @@ class FeatureMap(nn.Module):
                 return LaneFrameFeatures(**features["lane_frame"], name=f"{name}['lane_frame']")
             raise ValueError(
                 f"A dict of {name} takes one key, 'angles' (a list of indices), 'goal_frame' (a dict of "
-                f"GoalFrameFeatures' settings) or 'lane_frame' (LaneFrameFeatures'); got {dict(features)}."
+                f"GoalFrameFeatures' settings), 'lane_frame' (LaneFrameFeatures') or 'chain' (a list of maps applied "
+                f"in turn); got {dict(features)}."
             )
         if isinstance(features, Sequence) and not isinstance(features, str):
             return FeatureSelection(features, name)
@@ -514,7 +559,7 @@ class FeatureMap(nn.Module):
             messages name
         """
         state_dim = observation_space.shape[0]
-        if isinstance(features, (FeatureSelection, AngleFeatures, IndexPairFeatures)):
+        if isinstance(features, (FeatureSelection, AngleFeatures, IndexPairFeatures, FeatureChain)):
             features.check_state_dim(state_dim, name)
         states = th.zeros((2, *observation_space.shape))
         with th.no_grad():
