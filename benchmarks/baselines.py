@@ -671,7 +671,54 @@ def _demo_script(name: str) -> Any:
 
 
 #: the shipped sets whose expert is replayed from the demos' reset seeds, besides the MuJoCo tasks' (:func:`_demo_experts`)
-REPLAYED_EXPERTS = ("navigation", "highway_traffic", "pointmaze", "racetrack", "highway")
+REPLAYED_EXPERTS = ("navigation", "highway_traffic", "pointmaze", "racetrack", "highway", "parking")
+
+
+class _RecordedExpert:
+    """A parking expert whose actions of the episode under way are kept (``reset`` starts an episode)."""
+
+    def __init__(self, expert: Any):
+        self.expert, self.actions = expert, []
+
+    def reset(self) -> None:
+        self.expert.reset()
+        self.actions = []
+
+    def __call__(self, observation: np.ndarray) -> np.ndarray:
+        self.actions.append(self.expert(observation))
+        return self.actions[-1]
+
+
+def _in_turn(actions: List[np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:
+    """A policy that plays recorded actions in turn, whatever it observes."""
+    remaining = iter(actions)
+    return lambda _: next(remaining)
+
+
+def _parking_demo_actions(n_episodes: int) -> List[Tuple[int, List[np.ndarray]]]:
+    """
+    The reset seed and the actions of each of the first ``n_episodes`` parking demos: ``demos/make_parking_demos.py``'s
+    MPPI expert draws from one sampling stream, so its episodes are rerun in the script's order (its evaluation
+    episodes, then every demo seed, the ones it skipped included) with the settings its command line recorded.
+    """
+    script = _demo_script("make_parking_demos")
+    words = shipped_demo_info("parking")["command"].split()[2:]
+    option = {key.lstrip("-").replace("-", "_"): value for key, value in zip(words[::2], words[1::2])}
+    expert = script.ParkingExpert(
+        float(option["stop_weight"]), int(option["samples"]), int(option["horizon"]), int(option["iterations"]),
+        float(option["noise"]), float(option["temperature"]), int(option["seed"]),
+    )  # fmt: skip
+    stock_env = gym.make(script.ENV_ID)
+    for seed in range(int(option["eval_episodes"])):
+        script.run_episode(stock_env, seed, expert)
+    demo_env = gym.make(script.ENV_ID, config={"success_goal_reward": 0.0})  # as the script records: no early end
+    recorder, demos, seed = _RecordedExpert(expert), [], script.DEMO_SEED_OFFSET
+    while len(demos) < n_episodes:
+        if script.run_episode(demo_env, seed, recorder, float(option["stopped_speed"]))[2]:
+            demos.append((seed, recorder.actions))
+        seed += 1
+    return demos
+
 
 
 def _demo_experts(
@@ -691,6 +738,8 @@ def _demo_experts(
         expert = _demo_script("make_maze_demos").MazeGraphExpert(env)
         first_seed = _demo_script("expert_rollouts").DEMO_SEED_OFFSET
         return [(first_seed + i, expert.action) for i in range(n_episodes)]
+    if name == "parking":
+        return [(seed, _in_turn(actions)) for seed, actions in _parking_demo_actions(n_episodes)]
     if name in ("racetrack", "highway"):  # stateless: highway-env's lane (and speed) control of the observed car
         script = _demo_script("make_racetrack_demos")
         driver = script.LaneKeepingDriver(script.SCENARIOS[name])
@@ -771,12 +820,13 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
     script retrains the same expert bit for bit on this stack) from the demos' start seeds. Pendulum and cartpole:
     the actions are recovered from the shipped observations by inverting the env's known dynamics
     (:func:`pendulum_actions`, :func:`cartpole_actions`), so no expert is needed; every step is checked against the
-    exact model. Highway in traffic, the point maze, the racetrack and the highway without traffic: replays the scripted
-    expert of ``demos/make_highway_traffic_demos.py`` (highway-env's IDM/MOBIL driver), ``demos/make_maze_demos.py`` or
-    ``demos/make_racetrack_demos.py`` (highway-env's lane keeping) from the demos' reset seeds.
+    exact model. Highway in traffic, the point maze, the racetrack, the highway without traffic and parking: replays the
+    scripted expert of ``demos/make_highway_traffic_demos.py`` (highway-env's IDM/MOBIL driver), ``demos/make_maze_demos.py``,
+    ``demos/make_racetrack_demos.py`` (highway-env's lane keeping) or ``demos/make_parking_demos.py`` (MPPI on the exact
+    model, its episodes rerun in order: :func:`_parking_demo_actions`) from the demos' reset seeds.
 
     :param env: ``navigation``, ``pendulum``, ``cartpole``, ``highway_traffic``, ``pointmaze``, ``racetrack``,
-        ``highway`` or a MuJoCo task's name
+        ``highway``, ``parking`` or a MuJoCo task's name
     :param expert_path: the navigation or MuJoCo expert
     :param out_dir: where the files go
     :raises RuntimeError: the actions do not reproduce a shipped demo
