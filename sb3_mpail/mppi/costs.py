@@ -341,11 +341,11 @@ class LaneFrameFeatures(IndexPairFeatures):
     :param position: the state indices of the position ``(x, y)``
     :param heading: the indices of the heading's ``(cos, sin)``; ``None``: no heading features (states without one,
         e.g. a demo of positions and body-frame velocities)
-    :param keep: state indices passed on as they are after the lane-frame features (e.g. body-frame velocities, which
-        no place on the road changes); ``None``: none
     :param lateral_scale: factor on the lateral offset (e.g. 10 where a state unit is 10 m, so that the feature is in
         metres: a spectral-normed discriminator's slope bound otherwise lets it barely tell a lane's centre from its edge)
     :param cell_size: the lookup grid's cell, in the state's units; ``None``: half the median segment's length
+    :param keep: state indices passed on as they are after the lane-frame features (e.g. body-frame velocities, which
+        no place on the road changes); ``None``: none
     :param name: the setting it was given as, which error messages name
     """
 
@@ -354,9 +354,9 @@ class LaneFrameFeatures(IndexPairFeatures):
         centrelines: Union[str, Sequence[Any]],
         position: Sequence[int],
         heading: Sequence[int] | None = None,
-        keep: Sequence[int] | None = None,
         lateral_scale: float = 1.0,
         cell_size: Optional[float] = None,
+        keep: Sequence[int] | None = None,
         name: str = "lane_frame",
     ):
         pairs = dict(position=position) if heading is None else dict(position=position, heading=heading)
