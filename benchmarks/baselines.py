@@ -720,7 +720,6 @@ def _parking_demo_actions(n_episodes: int) -> List[Tuple[int, List[np.ndarray]]]
     return demos
 
 
-
 def _demo_experts(
     name: str, env_id: str, env: gym.Env, expert_path: Optional[Path], n_episodes: int
 ) -> List[Tuple[int, Callable[[np.ndarray], np.ndarray]]]:
