@@ -30,7 +30,15 @@ import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 
-from benchmarks.report import DETERMINISTIC_NOISE, format_ci, machine_description, machines_of, mean_ci, write_section
+from benchmarks.report import (
+    DETERMINISTIC_NOISE,
+    commands_of,
+    format_ci,
+    machine_description,
+    machines_of,
+    mean_ci,
+    write_section,
+)
 from benchmarks.scenarios import zoo_hyperparameters
 from sb3_mpail import MPAIL
 from sb3_mpail.demos import shipped_demo_info
@@ -186,7 +194,7 @@ def report(results_dir: Path) -> str:
         runs = [json.loads(path.read_text()) for path in sorted(grid.glob("*_seed*.json"))]
         if not runs:
             continue
-        commands = sorted({run.get("command", "") for run in runs})
+        commands = commands_of(runs)
         lines += ["", f"### {runs[0]['env_id']}, {runs[0]['timesteps']} env steps", "",
                   f"{runs[0]['n_eval_episodes']} evaluation episodes per run, on {machines_of(runs)}. Commands: "
                   + "; ".join(f"`{command}`" for command in commands), "",

@@ -3,7 +3,7 @@
 import math
 import platform
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence, Tuple
+from typing import Any, Iterable, List, Mapping, Sequence, Tuple
 
 import numpy as np
 import torch as th
@@ -42,6 +42,17 @@ def machines_of(runs: Iterable[Mapping[str, Any]]) -> str:
     :param runs: stored results
     """
     return "; ".join(sorted({run.get("machine", "machine not recorded") for run in runs}))
+
+
+def commands_of(runs: Iterable[Mapping[str, Any]], unrecorded: str = "") -> List[str]:
+    """
+    The command lines that made a table's stored runs (each run's ``command``), sorted, for the report's command line:
+    a table that several invocations filled quotes them all.
+
+    :param runs: stored results
+    :param unrecorded: what stands for the command of a run that predates the record
+    """
+    return sorted({run.get("command") or unrecorded for run in runs})
 
 
 def write_section(name: str, markdown: str, path: Path = BENCHMARKS_FILE) -> None:

@@ -35,6 +35,7 @@ from benchmarks.baselines import ALGO_LABELS, ALGOS, ENV_NAMES, env_id_of, env_n
 from benchmarks.report import (
     BENCHMARKS_FILE,
     DETERMINISTIC_NOISE,
+    commands_of,
     format_ci,
     machine_description,
     machines_of,
@@ -828,14 +829,13 @@ def write_report(
 
 def command_line(results: List[Dict[str, Any]], command: str) -> str:
     """
-    The commands that made a grid's results, in the order they first appear: each result records its own, so a
-    section that several runs of the runner filled quotes them all.
+    The commands that made a grid's results (:func:`~benchmarks.report.commands_of`).
 
     :param results: :func:`load_results`'s
     :param command: this invocation's command, quoted for results that predate the record
     :return: ``Command: `...``` or ``Commands: `...`; `...```
     """
-    commands = list(dict.fromkeys(result.get("command") or command for result in results)) or [command]
+    commands = commands_of(results, command) or [command]
     return ("Command: " if len(commands) == 1 else "Commands: ") + "; ".join(f"`{c}`" for c in commands)
 
 
