@@ -720,30 +720,39 @@ def _parking_demo_actions(n_episodes: int) -> List[Tuple[int, List[np.ndarray]]]
     return demos
 
 
+def _stateless_expert(
+    name: str, env_id: str, env: gym.Env, expert_path: Optional[Path]
+) -> Optional[Callable[[np.ndarray], np.ndarray]]:
+    """
+    The expert of a shipped set recorded by ``demos/expert_rollouts.py``'s ``record_demos`` (episode ``i`` from its
+    ``DEMO_SEED_OFFSET + i``) that acts on the observation alone, or ``None`` for the sets made otherwise.
+    """
+    if env_id in LOCOMOTION_TASKS:  # the TD3 expert of demos/make_mujoco_demos.py --save-expert
+        td3 = TD3.load(expert_path, device="cpu")
+        return lambda obs: td3.predict(obs, deterministic=True)[0]
+    if name == "pointmaze":  # the next cell follows from the ball's position
+        return _demo_script("make_maze_demos").MazeGraphExpert(env).action
+    if name in ("racetrack", "highway"):  # highway-env's lane (and speed) control of the observed car
+        script = _demo_script("make_racetrack_demos")
+        return script.LaneKeepingDriver(script.SCENARIOS[name]).act
+    return None
+
+
 def _demo_experts(
     name: str, env_id: str, env: gym.Env, expert_path: Optional[Path], n_episodes: int
 ) -> List[Tuple[int, Callable[[np.ndarray], np.ndarray]]]:
     """The reset seed and the expert of each of a shipped set's first ``n_episodes`` demos, as its script made them."""
-    if env_id in LOCOMOTION_TASKS:  # the TD3 expert of demos/make_mujoco_demos.py --save-expert
-        td3 = TD3.load(expert_path, device="cpu")
+    expert = _stateless_expert(name, env_id, env, expert_path)
+    if expert is not None:
         first_seed = _demo_script("expert_rollouts").DEMO_SEED_OFFSET
-        return [(first_seed + i, lambda obs: td3.predict(obs, deterministic=True)[0]) for i in range(n_episodes)]
+        return [(first_seed + i, expert) for i in range(n_episodes)]
     if name == "navigation":
         script = _demo_script("make_navigation_demos")
         ppo = PPO.load(expert_path or "/tmp/navigation_expert_ppo.zip", device="cpu")
-        expert = script.make_expert_policy(ppo, env)
-        return [(script.DEMO_SEED_BASE + i, expert) for i in range(n_episodes)]
-    if name == "pointmaze":  # stateless: the next cell follows from the ball's position
-        expert = _demo_script("make_maze_demos").MazeGraphExpert(env)
-        first_seed = _demo_script("expert_rollouts").DEMO_SEED_OFFSET
-        return [(first_seed + i, expert.action) for i in range(n_episodes)]
+        navigator = script.make_expert_policy(ppo, env)
+        return [(script.DEMO_SEED_BASE + i, navigator) for i in range(n_episodes)]
     if name == "parking":
         return [(seed, _in_turn(actions)) for seed, actions in _parking_demo_actions(n_episodes)]
-    if name in ("racetrack", "highway"):  # stateless: highway-env's lane (and speed) control of the observed car
-        script = _demo_script("make_racetrack_demos")
-        driver = script.LaneKeepingDriver(script.SCENARIOS[name])
-        first_seed = _demo_script("expert_rollouts").DEMO_SEED_OFFSET
-        return [(first_seed + i, driver.act) for i in range(n_episodes)]
     # highway_traffic: a fresh driver per episode (its lane-change timer is state); the crashed episodes' seeds skipped
     script = _demo_script("make_highway_traffic_demos")
     failed = set(shipped_demo_info(name)["failed_demo_seeds"])

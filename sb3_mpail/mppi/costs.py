@@ -487,7 +487,7 @@ class FeatureChain(nn.Sequential):
     def check_state_dim(self, state_dim: int, name: str) -> None:
         """Refuses indices out of range of what each map receives: ``state_dim``-D states, then its predecessor's output."""
         for index, features in enumerate(self):
-            if isinstance(features, (FeatureSelection, AngleFeatures, IndexPairFeatures)):
+            if hasattr(features, "check_state_dim"):  # the maps built from indices (a nested chain included)
                 features.check_state_dim(state_dim, f"{name}['chain'][{index}]")
             with th.no_grad():
                 state_dim = features(th.zeros(2, state_dim)).shape[1]
@@ -559,7 +559,7 @@ class FeatureMap(nn.Module):
             messages name
         """
         state_dim = observation_space.shape[0]
-        if isinstance(features, (FeatureSelection, AngleFeatures, IndexPairFeatures, FeatureChain)):
+        if hasattr(features, "check_state_dim"):  # the maps built from indices
             features.check_state_dim(state_dim, name)
         states = th.zeros((2, *observation_space.shape))
         with th.no_grad():
