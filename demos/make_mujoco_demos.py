@@ -15,6 +15,8 @@ This script:
    ``env.reset(seed=1000 + i)``), observations only: ``<out-dir>/<name>_<n>.npz``;
 4. writes ``<out-dir>/<name>.json`` (``ant.json``'s schema: returns, forward speed, steps, command).
 
+``--resume`` goes on training a saved expert; with ``--record-only`` it skips training and does steps 2-4 only.
+
 The expert itself is not shipped; ``--save-expert`` keeps it. Needs the ``scenarios`` extra (mujoco).
 
 Run from the repository root::
@@ -61,7 +63,11 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--resume", type=Path, default=None, help="go on training an expert saved by --save-expert")
     parser.add_argument("--batch-warmup", type=int, default=1_000, help="with --resume: random steps stored before updates")
     parser.add_argument("--save-expert", type=Path, default=None, help="where to save the expert (not shipped)")
-    return parser.parse_args()
+    parser.add_argument("--record-only", action="store_true", help="with --resume: score and record the saved expert as is")
+    args = parser.parse_args()
+    if args.record_only and args.resume is None:
+        parser.error("--record-only needs --resume: the expert to record")
+    return args
 
 
 class KeepBest(BaseCallback):
@@ -123,7 +129,8 @@ def main() -> None:
     keep_best = KeepBest(args.env, args.eval_freq, args.n_eval_checkpoint, args.seed + 3,
                          None if args.max_minutes is None else 60 * args.max_minutes)
     start = time.perf_counter()
-    model.learn(total_timesteps=args.timesteps, callback=keep_best, reset_num_timesteps=args.resume is None)
+    if not args.record_only:
+        model.learn(total_timesteps=args.timesteps, callback=keep_best, reset_num_timesteps=args.resume is None)
     train_seconds = time.perf_counter() - start
     if keep_best.best_state is not None:
         model.policy.load_state_dict(keep_best.best_state)
@@ -133,8 +140,9 @@ def main() -> None:
     expert = evaluate_locomotion(model, args.env, N_EVAL_EPISODES, seed=args.seed + 1)
     expert_mean, expert_std, expert_speed = expert["return"], expert["return_std"], expert["forward_speed"]
     random_mean, random_std = evaluate_random(args.env, seed=args.seed + 2, n_episodes=N_EVAL_EPISODES)
+    trained = "as saved" if args.record_only else f"best checkpoint at {keep_best.best_step}"
     print(f"expert return: {expert_mean:.1f} +/- {expert_std:.1f}, forward speed {expert_speed:.2f} m/s "
-          f"(best checkpoint at {keep_best.best_step} of {model.num_timesteps} steps, {train_seconds:.0f} s)")
+          f"({trained}, {model.num_timesteps} steps, {train_seconds:.0f} s)")
     print(f"random return: {random_mean:.1f} +/- {random_std:.1f}")
 
     episodes, demo_returns = record_demos(model, args.env, args.n_demos)
@@ -147,7 +155,7 @@ def main() -> None:
         "expert_algo": "TD3",
         "expert_timesteps": model.num_timesteps,
         "resumed_from": None if args.resume is None else str(args.resume),
-        "expert_checkpoint_timesteps": keep_best.best_step,
+        "expert_checkpoint_timesteps": None if args.record_only else keep_best.best_step,
         "seed": args.seed,
         "expert_return_mean": expert_mean,
         "expert_return_std": expert_std,
