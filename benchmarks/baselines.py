@@ -46,7 +46,7 @@ from imitation.algorithms.adversarial.gail import GAIL
 from imitation.data import rollout, types
 from imitation.rewards.reward_nets import BasicShapedRewardNet, RewardNet
 from imitation.util import logger as imitation_logger
-from stable_baselines3 import PPO, TD3
+from stable_baselines3 import PPO, SAC, TD3
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.policies import ActorCriticPolicy
@@ -727,9 +727,10 @@ def _stateless_expert(
     The expert of a shipped set recorded by ``demos/expert_rollouts.py``'s ``record_demos`` (episode ``i`` from its
     ``DEMO_SEED_OFFSET + i``) that acts on the observation alone, or ``None`` for the sets made otherwise.
     """
-    if env_id in LOCOMOTION_TASKS:  # the TD3 expert of demos/make_mujoco_demos.py --save-expert
-        td3 = TD3.load(expert_path, device="cpu")
-        return lambda obs: td3.predict(obs, deterministic=True)[0]
+    if env_id in LOCOMOTION_TASKS:  # the TD3 or SAC expert of demos/make_mujoco_demos.py --save-expert
+        algo = {"TD3": TD3, "SAC": SAC}[shipped_demo_info(name)["expert_algo"]]
+        expert = algo.load(expert_path, device="cpu")
+        return lambda obs: expert.predict(obs, deterministic=True)[0]
     if name == "pointmaze":  # the next cell follows from the ball's position
         return _demo_script("make_maze_demos").MazeGraphExpert(env).action
     if name in ("racetrack", "highway"):  # highway-env's lane (and speed) control of the observed car
@@ -820,7 +821,7 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
     Writes ``<out_dir>/<env>_<n>_actions.npz`` (``obs`` and the expert's ``acts``) for each shipped demo set
     ``<env>_<n>``, after checking that the actions reproduce the shipped observations.
 
-    MuJoCo locomotion (``hopper``, ``walker2d``, ``halfcheetah``, ``ant_v4``): the TD3 expert that
+    MuJoCo locomotion (``hopper``, ``walker2d``, ``halfcheetah``, ``ant_v4``): the TD3 or SAC expert that
     ``demos/make_mujoco_demos.py --save-expert`` saved (``expert_path``) is checked on the first step of each demo from
     its start seed, then labels the shipped observations with its actions (a whole open-loop replay diverges between
     machines: these bodies are chaotic, and float noise grows to metres within 50 steps). Navigation:
@@ -891,7 +892,7 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     commands = parser.add_subparsers(dest="command", required=True)
     make = commands.add_parser("make-action-demos", help="write benchmarks/action_demos/<env>_<n>_actions.npz for BC")
     make.add_argument("--env", required=True, choices=sorted(ENV_NAMES.values()))
-    make.add_argument("--expert", type=Path, default=None, help="navigation: the saved PPO expert; MuJoCo: the TD3 one")
+    make.add_argument("--expert", type=Path, default=None, help="navigation: the saved PPO expert; MuJoCo: the TD3 or SAC one")
     make.add_argument("--out-dir", type=Path, default=ACTION_DEMO_DIR)
     args = parser.parse_args(argv)
     for path in make_action_demos(args.env, args.expert, args.out_dir):
