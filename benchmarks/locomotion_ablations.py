@@ -78,6 +78,11 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         "staying up always pays, so a fall forfeits the rest of the episode's reward",
         changes=dict(policy_kwargs=dict(reward_form="softplus")),
     ),
+    "alive-bonus": dict(
+        question="the logit plus 1 per step (reward_offset=1): the logit's ranking of transitions, with a bonus for "
+        "staying up where softplus(d) pays even a confidently non-expert stance",
+        changes=dict(policy_kwargs=dict(reward_offset=1.0)),
+    ),
     "prior-updates-1": dict(question="one prior update per env step", changes=dict(prior_updates_per_step=1.0)),
     "prior-128": dict(
         question="the prior's actor and Q networks 128 x 128 instead of 256 x 256 (an update takes 0.6x the time)",

@@ -11,6 +11,7 @@ from torch import nn
 
 from sb3_mpail.checks import (
     BOOLEAN,
+    FINITE_NUMBER,
     HIDDEN_SIZES,
     NON_NEGATIVE_INTEGER,
     NON_NEGATIVE_NUMBER,
@@ -151,6 +152,9 @@ class MPPIPolicy(BasePolicy):
         (:data:`~sb3_mpail.mppi.costs.REWARD_FORMS`), for the planner's step costs, the value's returns and the prior's
         Q targets alike: ``"logit"``, ``d`` itself (AIRL's form, the paper's), or ``"softplus"``, ``-log(1 - D)``
         (GAIL's form), positive everywhere, so that on tasks whose episodes end at a fall staying up always pays
+    :param reward_offset: a constant added to the learned reward wherever it is used: a bonus per step alive where
+        falls end episodes, keeping the logit's ranking of transitions (the planner's choices within its horizon do
+        not change; the value's and the prior's, which see episodes end, do)
     :raises ValueError: a setting is out of its range (each is named)
     :raises TypeError: ``step_cost``, ``terminal_value``, ``constraint_cost`` or ``dynamics`` cannot be called with the
         arguments the planner gives it
@@ -190,6 +194,7 @@ class MPPIPolicy(BasePolicy):
         standardise_inputs: bool = False,
         min_input_scale: float = 1.0,
         reward_form: str = "logit",
+        reward_offset: float = 0.0,
     ):
         super().__init__(observation_space, action_space)
         if not isinstance(observation_space, spaces.Box) or len(observation_space.shape) != 1:
@@ -221,6 +226,7 @@ class MPPIPolicy(BasePolicy):
             standardise_inputs=(standardise_inputs, BOOLEAN),
             min_input_scale=(min_input_scale, POSITIVE_NUMBER),
             reward_form=(reward_form, one_of(tuple(REWARD_FORMS))),
+            reward_offset=(reward_offset, FINITE_NUMBER),
         )
         if step_cost is not None:
             check_signature(step_cost, "step_cost", "c(states, next_states) -> costs", 2)
@@ -257,8 +263,9 @@ class MPPIPolicy(BasePolicy):
             standardise_inputs=standardise_inputs,
             min_input_scale=min_input_scale,
             reward_form=reward_form,
+            reward_offset=reward_offset,
         )
-        self.reward_form = reward_form
+        self.reward_form, self.reward_offset = reward_form, float(reward_offset)
         self.discriminator_features: nn.Module | None = None
         self.feature_space = self.demo_feature_space = observation_space
         if discriminator_features is not None:
@@ -299,7 +306,7 @@ class MPPIPolicy(BasePolicy):
             sampler=make_sampler(sampler, low, high, noise_std, sampler_kwargs),
             step_cost=step_cost
             if step_cost is not None
-            else TransitionCost(self.discriminator, self.discriminator_features, reward_form),
+            else TransitionCost(self.discriminator, self.discriminator_features, reward_form, self.reward_offset),
             terminal_value=terminal_value,
             # the paper's zero mean, kept inside the bounds for spaces that exclude 0
             neutral_action=th.as_tensor(np.clip(np.zeros_like(low), low, high)),
@@ -333,9 +340,12 @@ class MPPIPolicy(BasePolicy):
                 module.fit(states)
 
     def learned_reward(self, observations: th.Tensor, next_observations: th.Tensor) -> th.Tensor:
-        """The learned reward of ``(batch, obs_dim)`` transitions, ``(batch,)``, in the policy's ``reward_form``."""
+        """The learned reward of ``(batch, obs_dim)`` transitions, ``(batch,)``: the policy's ``reward_form`` plus its
+        ``reward_offset``."""
         features = self.discriminator_features
-        return learned_reward(self.discriminator, features, observations, next_observations, self.reward_form)
+        return learned_reward(
+            self.discriminator, features, observations, next_observations, self.reward_form, self.reward_offset
+        )
 
     def features(self, states: th.Tensor) -> th.Tensor:
         """What the discriminator sees of ``(batch, state_dim)`` states: ``discriminator_features`` or the states."""

@@ -413,3 +413,19 @@ def test_the_softplus_reward_form_pays_softplus_of_the_logit_in_planning_the_val
     assert th.allclose(step_costs, -rewards.view(2, 5))
     model.save(tmp_path / "model")
     assert MPAIL.load(tmp_path / "model").policy.reward_form == "softplus"
+
+
+def test_a_reward_offset_adds_to_the_learned_reward_in_planning_the_value_and_the_prior(demos, tmp_path):
+    planner = dict(TINY_PLANNER, reward_offset=1.5, policy_prior=True, n_proposals=2, prior_kwargs=dict(net_arch=(8,)))
+    model = make_model(demos, discriminator_update_interval=1, prior_batch_size=8, policy_kwargs=planner).learn(16)
+    model.policy.set_training_mode(False)
+    states, next_states = th.randn(2, 5, 3), th.randn(2, 5, 3)
+    with th.no_grad():
+        logits = model.policy.discriminator(states.view(10, 3), None, next_states.view(10, 3), None)
+        rewards = model._learned_reward(states.view(10, 3), next_states.view(10, 3))
+        step_costs = model.policy.planner.step_cost(states, next_states)
+        assert model.policy.planner.step_cost.planning_view(3) is None  # the fused views sum bare logits
+    assert th.allclose(rewards, logits + 1.5)
+    assert th.allclose(step_costs, -rewards.view(2, 5))
+    model.save(tmp_path / "model")
+    assert MPAIL.load(tmp_path / "model").policy.reward_offset == 1.5

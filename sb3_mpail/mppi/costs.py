@@ -667,55 +667,67 @@ def learned_reward(
     states: th.Tensor,
     next_states: th.Tensor,
     reward_form: str = "logit",
+    reward_offset: float = 0.0,
 ) -> th.Tensor:
     """
     The learned reward of ``(batch, state_dim)`` transitions, ``(batch,)``: the discriminator's logit on the features of
-    ``s`` and ``s'``, in the :data:`REWARD_FORMS` form ``reward_form``.
+    ``s`` and ``s'``, in the :data:`REWARD_FORMS` form ``reward_form``, plus ``reward_offset``.
 
     :param discriminator: the reward net giving the logit ``d_theta``
     :param features: the discriminator's feature map ``phi``; ``None``: the states themselves
     :param states: ``s``
     :param next_states: ``s'``
     :param reward_form: a key of :data:`REWARD_FORMS`
+    :param reward_offset: a constant added to every transition's reward
     """
     if features is not None:
         states, next_states = features(states), features(next_states)
-    return REWARD_FORMS[reward_form](discriminator(states, None, next_states, None))
+    return REWARD_FORMS[reward_form](discriminator(states, None, next_states, None)) + reward_offset
 
 
 class TransitionCost(nn.Module):
     """
-    Step cost ``c(s, s') = -r(d_theta(phi(s), phi(s')))`` over any leading batch shape, ``r`` the reward form.
+    Step cost ``c(s, s') = -r(d_theta(phi(s), phi(s')))`` over any leading batch shape, ``r`` the reward form plus the
+    reward offset.
 
     :param discriminator: the reward net giving the logit ``d_theta``
     :param features: the discriminator's feature map ``phi``; ``None``: the states themselves
     :param reward_form: the learned reward as a function of the logit, a key of :data:`REWARD_FORMS`
+    :param reward_offset: a constant added to every transition's reward
     """
 
-    def __init__(self, discriminator: BasicRewardNet, features: Optional[nn.Module] = None, reward_form: str = "logit"):
+    def __init__(
+        self,
+        discriminator: BasicRewardNet,
+        features: Optional[nn.Module] = None,
+        reward_form: str = "logit",
+        reward_offset: float = 0.0,
+    ):
         super().__init__()
         self.discriminator = discriminator
         self.features = features
         self.reward_form = reward_form
+        self.reward_offset = reward_offset
         self._planning_views: ViewCache[FusedTransitionCost] = ViewCache()
 
     def forward(self, states: th.Tensor, next_states: th.Tensor) -> th.Tensor:
         batch_shape = states.shape[:-1]
         states, next_states = states.reshape(-1, states.shape[-1]), next_states.reshape(-1, states.shape[-1])
-        return -learned_reward(self.discriminator, self.features, states, next_states, self.reward_form).view(batch_shape)
+        rewards = learned_reward(self.discriminator, self.features, states, next_states, self.reward_form, self.reward_offset)
+        return -rewards.view(batch_shape)
 
     def planning_view(self, state_dim: int) -> Optional[Union[FusedTransitionCost, FrozenEnsembleCost, MappedView]]:
         """
         The fused whole-horizon cost with the discriminator's weights frozen (until they change), behind the feature
         map if there is one (:class:`~sb3_mpail.mppi.ensemble.FrozenEnsembleCost` for an ensemble), or ``None`` where
         the module path must be used: gradients enabled, training mode (spectral norm's power iteration then updates
-        its vectors on every call), a reward form other than the logit (the fused views sum logits over the horizon),
-        or a discriminator other than MLPs on ``(s, s')``.
+        its vectors on every call), a reward form other than the logit or a reward offset (the fused views sum logits
+        over the horizon), or a discriminator other than MLPs on ``(s, s')``.
 
         :param state_dim: size of a state
         """
         net = self.discriminator
-        if th.is_grad_enabled() or net.training or self.reward_form != "logit":
+        if th.is_grad_enabled() or net.training or self.reward_form != "logit" or self.reward_offset != 0:
             return None
 
         def inputs(mlp: Optional[FrozenMlp]) -> int:  # what each state gives the first layer: the mapped features
