@@ -397,8 +397,13 @@ def test_a_discriminator_ensemble_costs_its_mean_logit_less_its_spread_and_train
     assert np.array_equal(MPAIL.load(tmp_path / "model").predict(observation, deterministic=True)[0], action)
 
 
-def test_the_softplus_reward_form_pays_softplus_of_the_logit_in_planning_the_value_and_the_prior(demos, tmp_path):
-    planner = dict(TINY_PLANNER, reward_form="softplus", policy_prior=True, n_proposals=2, prior_kwargs=dict(net_arch=(8,)))
+def rewards_of_a_reward_setting(demos, tmp_path, **setting) -> tuple:
+    """
+    Trains a tiny model with the prior under a reward ``setting`` (a policy kwarg), checks what every setting must
+    hold (the planner's costs are the learned reward's negation, on the module path; the setting survives save/load)
+    and returns the discriminator's logits and the learned rewards of the same random transitions.
+    """
+    planner = dict(TINY_PLANNER, **setting, policy_prior=True, n_proposals=2, prior_kwargs=dict(net_arch=(8,)))
     model = make_model(demos, discriminator_update_interval=1, prior_batch_size=8, policy_kwargs=planner).learn(16)
     model.policy.set_training_mode(False)
     states, next_states = th.randn(2, 5, 3), th.randn(2, 5, 3)
@@ -406,26 +411,22 @@ def test_the_softplus_reward_form_pays_softplus_of_the_logit_in_planning_the_val
         logits = model.policy.discriminator(states.view(10, 3), None, next_states.view(10, 3), None)
         rewards = model._learned_reward(states.view(10, 3), next_states.view(10, 3))
         step_costs = model.policy.planner.step_cost(states, next_states)
-        # the fused views sum logits over the horizon, so this form plans on the module path
+        # the fused views sum bare logits over the horizon, so these settings plan on the module path
         assert model.policy.planner.step_cost.planning_view(3) is None
-    assert (rewards > 0).all()
-    assert th.allclose(rewards, th.nn.functional.softplus(logits))
     assert th.allclose(step_costs, -rewards.view(2, 5))
     model.save(tmp_path / "model")
-    assert MPAIL.load(tmp_path / "model").policy.reward_form == "softplus"
+    loaded = MPAIL.load(tmp_path / "model").policy
+    for name, value in setting.items():
+        assert getattr(loaded, name) == value
+    return logits, rewards
+
+
+def test_the_softplus_reward_form_pays_softplus_of_the_logit_in_planning_the_value_and_the_prior(demos, tmp_path):
+    logits, rewards = rewards_of_a_reward_setting(demos, tmp_path, reward_form="softplus")
+    assert (rewards > 0).all()
+    assert th.allclose(rewards, th.nn.functional.softplus(logits))
 
 
 def test_a_reward_offset_adds_to_the_learned_reward_in_planning_the_value_and_the_prior(demos, tmp_path):
-    planner = dict(TINY_PLANNER, reward_offset=1.5, policy_prior=True, n_proposals=2, prior_kwargs=dict(net_arch=(8,)))
-    model = make_model(demos, discriminator_update_interval=1, prior_batch_size=8, policy_kwargs=planner).learn(16)
-    model.policy.set_training_mode(False)
-    states, next_states = th.randn(2, 5, 3), th.randn(2, 5, 3)
-    with th.no_grad():
-        logits = model.policy.discriminator(states.view(10, 3), None, next_states.view(10, 3), None)
-        rewards = model._learned_reward(states.view(10, 3), next_states.view(10, 3))
-        step_costs = model.policy.planner.step_cost(states, next_states)
-        assert model.policy.planner.step_cost.planning_view(3) is None  # the fused views sum bare logits
+    logits, rewards = rewards_of_a_reward_setting(demos, tmp_path, reward_offset=1.5)
     assert th.allclose(rewards, logits + 1.5)
-    assert th.allclose(step_costs, -rewards.view(2, 5))
-    model.save(tmp_path / "model")
-    assert MPAIL.load(tmp_path / "model").policy.reward_offset == 1.5
