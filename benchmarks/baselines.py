@@ -46,7 +46,7 @@ from imitation.algorithms.adversarial.gail import GAIL
 from imitation.data import rollout, types
 from imitation.rewards.reward_nets import BasicShapedRewardNet, RewardNet
 from imitation.util import logger as imitation_logger
-from stable_baselines3 import PPO, SAC, TD3
+from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.policies import ActorCriticPolicy
@@ -728,7 +728,7 @@ def _stateless_expert(
     ``DEMO_SEED_OFFSET + i``) that acts on the observation alone, or ``None`` for the sets made otherwise.
     """
     if env_id in LOCOMOTION_TASKS:  # the TD3 or SAC expert of demos/make_mujoco_demos.py --save-expert
-        algo = {"TD3": TD3, "SAC": SAC}[shipped_demo_info(name)["expert_algo"]]
+        algo = _demo_script("make_mujoco_demos").EXPERT_ALGOS[shipped_demo_info(name)["expert_algo"].lower()]
         expert = algo.load(expert_path, device="cpu")
         return lambda obs: expert.predict(obs, deterministic=True)[0]
     if name == "pointmaze":  # the next cell follows from the ball's position
