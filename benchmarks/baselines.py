@@ -91,6 +91,7 @@ ENV_NAMES: Dict[str, str] = {
     "sb3_mpail/NavigationLap-v0": "lap",
     "sb3_mpail/HighwayTraffic-v0": "highway_traffic",
     "sb3_mpail/PointMaze-v0": "pointmaze",
+    "sb3_mpail/PointMazeMedium-v0": "pointmaze_medium",
     "sb3_mpail/Racetrack-v0": "racetrack",
     "sb3_mpail/Highway-v0": "highway",
     "sb3_mpail/Parking-v0": "parking",
@@ -671,7 +672,7 @@ def _demo_script(name: str) -> Any:
 
 
 #: the shipped sets whose expert is replayed from the demos' reset seeds, besides the MuJoCo tasks' (:func:`_demo_experts`)
-REPLAYED_EXPERTS = ("navigation", "highway_traffic", "pointmaze", "racetrack", "highway", "parking")
+REPLAYED_EXPERTS = ("navigation", "highway_traffic", "pointmaze", "pointmaze_medium", "racetrack", "highway", "parking")
 
 
 class _RecordedExpert:
@@ -731,7 +732,7 @@ def _stateless_expert(
         algo = _demo_script("make_mujoco_demos").EXPERT_ALGOS[shipped_demo_info(name)["expert_algo"].lower()]
         expert = algo.load(expert_path, device="cpu")
         return lambda obs: expert.predict(obs, deterministic=True)[0]
-    if name == "pointmaze":  # the next cell follows from the ball's position
+    if name in ("pointmaze", "pointmaze_medium"):  # the next cell follows from the ball's and the goal's positions
         return _demo_script("make_maze_demos").MazeGraphExpert(env).action
     if name in ("racetrack", "highway"):  # highway-env's lane (and speed) control of the observed car
         script = _demo_script("make_racetrack_demos")

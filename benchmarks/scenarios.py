@@ -19,7 +19,8 @@ policy's figures come from the shipped demos' information file (``sb3_mpail/data
   next to the expert's;
 - ``pointmaze``: gymnasium-robotics PointMaze (U-maze, fixed start and goal cells) planned through a wall-free
   point-mass model: its return as a normalised score, the share of episodes ending at the goal and the share of
-  steps touching a wall.
+  steps touching a wall;
+- ``pointmaze_medium``: the same on PointMaze's Medium maze from random start and goal cells.
 
 Run: ``python -m benchmarks.scenarios cartpole --seeds 0 1 2``; each run's figures are kept in
 ``benchmarks/figures/scenarios.json`` and the ``scenarios`` section of BENCHMARKS.md is rebuilt from all of them, with
@@ -34,6 +35,7 @@ from functools import partial
 from pathlib import Path
 from typing import Callable, Dict, List, NamedTuple, Optional, Tuple
 
+import gymnasium as gym
 import numpy as np
 import torch as th
 import yaml
@@ -209,13 +211,13 @@ def ant_reference(stats: Dict) -> str:
     )
 
 
-def pointmaze_figures(model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, float]:
+def pointmaze_figures(env_id: str, model: MPAIL, stats: Dict, n_episodes: int) -> Dict[str, float]:
     """
     Mean return of the deterministic planner, its normalised score, the share of episodes ending within 0.45 m of
-    the goal and the share of steps touching a wall: the planning model has no walls, so the learned cost and
-    value alone must keep the planner in the corridors the demos took.
+    the goal and the share of steps touching a wall: the planning model has no walls, which the entries give the
+    planner as a known constraint cost.
     """
-    figures = point_maze_figures(model, n_episodes, EVAL_SEED)
+    figures = point_maze_figures(model, n_episodes, EVAL_SEED, env_id=env_id)
     return {**figures, "score": normalised_score(figures["return"], stats)}
 
 
@@ -223,8 +225,13 @@ def pointmaze_reference(stats: Dict) -> str:
     return (
         f"Expert ({stats['expert_algo']}) {stats['expert_return_mean']:.1f}, at the goal in "
         f"{stats['expert_success_rate']:.0%} of {stats['n_eval_episodes']} episodes, touching a wall in "
-        f"{stats['expert_wall_steps']:.2%} of steps; random {stats['random_return_mean']:.1f} over 100-step episodes."
+        f"{stats['expert_wall_steps']:.2%} of steps; random {stats['random_return_mean']:.1f} over "
+        f"{gym.spec(stats['env_id']).max_episode_steps}-step episodes."
     )
+
+
+MAZE_COLUMNS = (("return", "return"), ("score", "normalised score"), ("success", "success rate"),
+                ("wall_steps", "steps on a wall"))  # fmt: skip
 
 
 class Scenario(NamedTuple):
@@ -319,8 +326,18 @@ SCENARIOS: Dict[str, Scenario] = {
         "sb3_mpail/PointMaze-v0",
         "pointmaze",
         "gymnasium-robotics PointMaze U-maze through a wall-free point-mass model, from 4 scripted demos (observations only)",
-        pointmaze_figures,
-        (("return", "return"), ("score", "normalised score"), ("success", "success rate"), ("wall_steps", "steps on a wall")),
+        partial(pointmaze_figures, "sb3_mpail/PointMaze-v0"),
+        MAZE_COLUMNS,
+        pointmaze_reference,
+        20,
+    ),
+    "pointmaze_medium": Scenario(
+        "sb3_mpail/PointMazeMedium-v0",
+        "pointmaze_medium",
+        "gymnasium-robotics PointMaze Medium from random start and goal cells, seen along the maze's shortest paths, "
+        "from 32 scripted demos (observations only)",
+        partial(pointmaze_figures, "sb3_mpail/PointMazeMedium-v0"),
+        MAZE_COLUMNS,
         pointmaze_reference,
         20,
     ),

@@ -139,8 +139,8 @@ def test_action_demos_match_the_shipped_observation_only_demos(tmp_path):
 
 @pytest.mark.parametrize(
     "env, demo_set",
-    [("highway_traffic", "highway_traffic_16"), ("pointmaze", "pointmaze_4"), ("racetrack", "racetrack_4"),
-     ("highway", "highway_4")],  # fmt: skip
+    [("highway_traffic", "highway_traffic_16"), ("pointmaze", "pointmaze_4"), ("pointmaze_medium", "pointmaze_medium_32"),
+     ("racetrack", "racetrack_4"), ("highway", "highway_4")],  # fmt: skip
 )
 def test_scripted_experts_action_demos_replay_through_the_shipped_observations(tmp_path, env, demo_set):
     # highway-env's IDM/MOBIL driver and lane keeping and the maze's graph expert, replayed from the demos' reset seeds,

@@ -122,3 +122,84 @@ def test_the_point_maze_walls_cost_is_paid_in_wall_cells_and_near_them_not_in_th
     assert (costs[len(free):] > 0).all()  # in the inner wall, and within the ball's 0.1 m radius of it
     with pytest.raises(ValueError, match="maze_walls needs a gymnasium-robotics maze env"):
         maze_walls(gym.make("Pendulum-v1"))
+
+
+def test_shortest_paths_step_through_free_cells_and_lead_out_of_walls():
+    from sb3_mpail.envs.maze import U_MAZE_FIXED_START_GOAL
+    from sb3_mpail.mppi.costs import maze_shortest_paths
+
+    next_cell, steps = maze_shortest_paths(U_MAZE_FIXED_START_GOAL)
+    start, goal = 3 * 5 + 1, 1 * 5 + 1  # the reset and goal cells, (row, column) flattened over 5 columns
+    path = [start]
+    while path[-1] != goal:
+        path.append(int(next_cell[path[-1], goal]))
+    # round the inner wall: right along the bottom corridor, up the right-hand one, back left along the top
+    assert [divmod(cell, 5) for cell in path] == [(3, 1), (3, 2), (3, 3), (2, 3), (1, 3), (1, 2), (1, 1)]
+    assert steps[start, goal] == 6 and steps[goal, goal] == 0
+    # a state imagined in the inner wall (2, 1) steps out to a free neighbour next to the goal, not through walls
+    assert divmod(int(next_cell[2 * 5 + 1, goal]), 5) == (1, 1) and steps[2 * 5 + 1, goal] == 1
+    # a free cell is never entered from a wall: the bottom corridor's path to the goal does not cross the inner wall
+    assert steps[3 * 5 + 2, goal] == 5
+
+
+def test_maze_frame_features_point_to_the_next_cell_and_measure_the_path_left():
+    from sb3_mpail.envs.maze import U_MAZE_FIXED_START_GOAL
+    from sb3_mpail.mppi.costs import FeatureMap, MazeFrameFeatures
+
+    features = FeatureMap.wrap(
+        {"maze_frame": dict(maze_map=U_MAZE_FIXED_START_GOAL, position=[0, 1], goal_position=[4, 5], velocity=[2, 3])}
+    )
+    assert isinstance(features, MazeFrameFeatures)
+    # cell (row, column) centres are x = column - 2, y = 2 - row; the goal (1, 1) is at (-1, 1) plus noise
+    states = th.tensor([
+        [-1.0, -1.0, 0.5, 0.0, -1.1, 1.2],  # in the start cell (3, 1): next is (3, 2), at (0, -1), 5 cells from the goal's
+        [0.0, 1.0, -0.5, 0.0, -1.1, 1.2],  # next to the goal's cell: make for the goal itself
+    ])
+    expected = th.tensor([
+        [1.0, 0.0, 1.0 + 5.0, 0.5, 0.0],
+        [-1.1, 0.2, float(np.hypot(1.1, 0.2)), -0.5, 0.0],
+    ])
+    assert th.allclose(features(states), expected)
+
+
+def test_maze_frame_features_refuse_a_ragged_map_and_an_unknown_name():
+    from sb3_mpail.mppi.costs import MazeFrameFeatures
+
+    with pytest.raises(ValueError, match=r"maze_frame\['maze_map'\] must be rows of cells of one length"):
+        MazeFrameFeatures([[1, 1, 1], [1, 0]], position=[0, 1], goal_position=[4, 5])
+    with pytest.raises(ValueError, match="No maze map is named 'large'"):
+        MazeFrameFeatures("large", position=[0, 1], goal_position=[4, 5])
+
+
+def test_medium_maze_draws_its_start_and_goal_cells_at_random_and_passes_check_env():
+    skip_without_point_maze()
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = gym.make("sb3_mpail/PointMazeMedium-v0")
+    assert env.spec.max_episode_steps == 200
+    sb3_check_env(env)
+    maze = env.unwrapped.maze
+    cells = set()
+    for seed in range(20):
+        observation, _ = env.reset(seed=seed)
+        start, goal = (tuple(maze.cell_xy_to_rowcol(xy)) for xy in (observation[:2], observation[4:]))
+        assert maze.maze_map[start[0]][start[1]] != 1 and maze.maze_map[goal[0]][goal[1]] != 1 and start != goal
+        cells |= {start, goal}
+    assert len(cells) > 10  # of its 21 free cells
+
+
+def test_shipped_medium_maze_demos_reach_their_goals_from_many_cells_without_touching_the_walls():
+    skip_without_point_maze()
+    from sb3_mpail.mppi.constraints import make_constraint_cost
+
+    demos = SHIPPED_DEMO_DIR / "pointmaze_medium_32.npz"
+    with np.load(demos) as data:
+        episodes = data["obs"]
+    assert episodes.shape == (32, 201, 6)
+    assert (np.linalg.norm(episodes[:, -1, :2] - episodes[:, -1, 4:], axis=1) < 0.45).all()  # PointMaze's success
+    assert len({tuple(np.floor(episode[0, :2]).astype(int)) for episode in episodes}) > 10  # starts in many cells
+    walls = make_constraint_cost("point_maze_medium_walls", state_dim=6)
+    assert float(walls(th.as_tensor(episodes.reshape(-1, 6))).max()) == 0  # never within the ball's radius of a wall
+    load_demos(demos, gym.make("sb3_mpail/PointMazeMedium-v0").observation_space)
+    stats = shipped_demo_info("pointmaze_medium")
+    assert stats["expert_success_rate"] == 1.0 and stats["expert_return_mean"] > 3 * stats["random_return_mean"]

@@ -8,7 +8,7 @@ import pytest
 
 from sb3_mpail import MPAIL
 from sb3_mpail.mppi.constraints import RectangleObstacles
-from sb3_mpail.mppi.costs import FeatureSelection, GoalFrameFeatures, LaneFrameFeatures
+from sb3_mpail.mppi.costs import FeatureSelection, GoalFrameFeatures, LaneFrameFeatures, MazeFrameFeatures
 from sb3_mpail.mppi.dynamics import LearnedDynamics, PointMassDynamics
 from sb3_mpail.mppi.highway_dynamics import HighwayKinematics, RacetrackKinematics
 
@@ -74,3 +74,16 @@ def test_point_maze_trains_with_the_shipped_zoo_entry_planning_through_the_point
     assert isinstance(model.policy.discriminator_features, GoalFrameFeatures)
     assert model.policy.discriminator_features.indices == {"position": [0, 1], "goal_position": [4, 5], "velocity": [2, 3]}
     assert model.policy.value_net[0].in_features == 6
+
+
+def test_medium_maze_trains_with_the_shipped_zoo_entry_seeing_the_ball_along_the_mazes_shortest_paths(tmp_path):
+    pytest.importorskip("mujoco")
+    pytest.importorskip("gymnasium_robotics")
+    model = zoo_train("sb3_mpail/PointMazeMedium-v0", 800, tmp_path)  # one rollout of 4 envs x 200 steps
+    assert isinstance(model.policy.dynamics, PointMassDynamics)
+    assert isinstance(model.policy.planner.constraint_cost, RectangleObstacles)
+    # discriminator: offset to the next waypoint, path length left, velocity; value: the same without the velocity
+    assert isinstance(model.policy.discriminator_features, MazeFrameFeatures)
+    assert model.policy.feature_space.shape == (5,)
+    value = model.policy.value_net
+    assert isinstance(value.features, MazeFrameFeatures) and value.network[0].in_features == 3

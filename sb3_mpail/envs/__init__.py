@@ -47,6 +47,15 @@ if "sb3_mpail/Ant-v0" not in gym.registry:
 # needs the `scenarios` extra, and making it without gymnasium-robotics raises an ImportError saying what to install.
 if "sb3_mpail/PointMaze-v0" not in gym.registry:
     gym.register(id="sb3_mpail/PointMaze-v0", entry_point="sb3_mpail.envs.maze:FlatPointMazeEnv", max_episode_steps=100)
+# gymnasium-robotics' PointMaze Medium (8 x 8) with its stock random start and goal cells, the same observation and
+# rate, 200 steps (10 s); needs the `scenarios` extra.
+if "sb3_mpail/PointMazeMedium-v0" not in gym.registry:
+    gym.register(
+        id="sb3_mpail/PointMazeMedium-v0",
+        entry_point="sb3_mpail.envs.maze:FlatPointMazeEnv",
+        kwargs={"maze_map": "medium"},
+        max_episode_steps=200,
+    )
 
 # highway-env's racetrack-v0 without other vehicles, observed through the ego car's flat state (200 steps, one lap);
 # needs the `scenarios` extra, and making it without highway-env raises an ImportError saying what to install.

@@ -4,7 +4,8 @@ extra); making this environment without it raises an ImportError that says what 
 
 ``sb3_mpail/PointMaze-v0`` is ``PointMaze_UMaze-v3``'s U-shaped maze with its start and goal cells fixed, so that
 the demos and the task agree: the ball starts in the bottom-left cell and must go right, up the right-hand corridor
-and back left to the top-left cell, around the inner wall. Its planning model is
+and back left to the top-left cell, around the inner wall. ``sb3_mpail/PointMazeMedium-v0`` is
+``PointMaze_Medium-v3``'s 8 x 8 maze with its stock random start and goal cells. Their planning model is
 :class:`sb3_mpail.mppi.dynamics.PointMassDynamics`, which knows nothing of the walls.
 """
 
@@ -32,6 +33,25 @@ U_MAZE_FIXED_START_GOAL: List[List[Union[int, str]]] = [
     [1, 1, 1, 1, 1],
 ]
 POINT_MAZE_ID = "sb3_mpail/PointMaze-v0"
+POINT_MAZE_MEDIUM_ID = "sb3_mpail/PointMazeMedium-v0"
+
+
+def named_maze_map(name: str) -> List[List[Union[int, str]]]:
+    """
+    A maze map by name: ``"u_maze_fixed"`` (:data:`U_MAZE_FIXED_START_GOAL`) or ``"medium"`` (gymnasium-robotics'
+    ``MEDIUM_MAZE``: every free cell a possible start and goal; needs the ``scenarios`` extra).
+
+    :param name: the map's name
+    :raises ValueError: an unknown name
+    """
+    if name == "u_maze_fixed":
+        return U_MAZE_FIXED_START_GOAL
+    if name == "medium":
+        require_gymnasium_robotics()
+        from gymnasium_robotics.envs.maze.maps import MEDIUM_MAZE
+
+        return MEDIUM_MAZE
+    raise ValueError(f"No maze map is named {name!r}; the names are 'u_maze_fixed' and 'medium'.")
 
 
 def require_gymnasium_robotics() -> None:
@@ -52,32 +72,39 @@ def require_gymnasium_robotics() -> None:
 
 class FlatPointMazeEnv(gym.Env):
     """
-    A force-actuated ball in ``PointMaze_UMaze-v3``'s maze with a flat Box observation
-    ``[x, y, vx, vy, goal_x, goal_y]`` (m, m/s). The start and goal positions are the fixed cells' centres plus
-    PointMaze's uniform noise of +-0.25 m, so the goal is observed. The task is PointMaze's continuing one with the
-    goal held (no termination): the dense reward ``exp(-distance to goal)`` rewards getting there fast and staying.
+    A force-actuated ball in a gymnasium-robotics PointMaze with a flat Box observation ``[x, y, vx, vy, goal_x,
+    goal_y]`` (m, m/s). The start and goal positions are cells' centres (the map's ``"r"`` and ``"g"`` cells, or
+    random free cells where it has none) plus PointMaze's uniform noise of +-0.25 m, so the goal is observed. The task
+    is PointMaze's continuing one with the goal held (no termination): the dense reward ``exp(-distance to goal)``
+    rewards getting there fast and staying.
 
     Each action (the force in ``[-1, 1]^2``, x 100 N) is held for ``action_repeat`` MuJoCo steps of 0.01 s and the
     reward is summed over them. PointMaze documents a 10 Hz control rate but steps its 0.01 s simulation once per
     action; at 100 Hz a planner would need hundreds of steps to see a corridor ahead. ``sb3_mpail/PointMaze-v0``
-    acts at 20 Hz and truncates after 100 actions, 5 s.
+    acts at 20 Hz and truncates after 100 actions, 5 s; ``sb3_mpail/PointMazeMedium-v0`` after 200, 10 s.
 
     The info dict adds ``wall_contact``: whether the ball touched a wall during the step (the steps where the
     wall-free planning model is wrong). It holds the gymnasium-robotics environment instead of wrapping it, so that
     it is no goal env to SB3.
 
+    :param maze_map: the map (rows of cells, 1 for a wall) or its name (:func:`named_maze_map`)
     :param action_repeat: MuJoCo steps (0.01 s each) per action
     :param render_mode: gymnasium render mode
     """
 
     metadata = {"render_modes": ["human", "rgb_array", "depth_array"], "render_fps": 20}  # the default action_repeat
 
-    def __init__(self, action_repeat: int = 5, render_mode: Optional[str] = None):
+    def __init__(
+        self,
+        maze_map: Union[str, List[List[Union[int, str]]]] = "u_maze_fixed",
+        action_repeat: int = 5,
+        render_mode: Optional[str] = None,
+    ):
         require_gymnasium_robotics()
         from gymnasium_robotics.envs.maze.point_maze import PointMazeEnv
 
         self.maze_env = PointMazeEnv(
-            maze_map=U_MAZE_FIXED_START_GOAL,
+            maze_map=named_maze_map(maze_map) if isinstance(maze_map, str) else maze_map,
             render_mode=render_mode,
             reward_type="dense",
             continuing_task=True,
@@ -87,8 +114,10 @@ class FlatPointMazeEnv(gym.Env):
         self.render_mode = render_mode
         model = self.maze_env.point_env.model
         self.wall_geoms = {index for index in range(model.ngeom) if model.geom(index).name.startswith("block_")}
-        # Finite bounds: the maze spans +-2.5 m; speeds are clipped to 5 m/s before each MuJoCo step.
-        high = np.array([3.0, 3.0, 10.0, 10.0, 3.0, 3.0], dtype=np.float32)
+        # Finite bounds: the maze spans half its cells either side of 0 (1 m each); speeds are clipped to 5 m/s before
+        # each MuJoCo step.
+        extent = float(max(self.maze.map_length, self.maze.map_width)) / 2 + 0.5
+        high = np.array([extent, extent, 10.0, 10.0, extent, extent], dtype=np.float32)
         self.observation_space = spaces.Box(-high, high, dtype=np.float32)
         self.action_space = self.maze_env.action_space
 
@@ -126,13 +155,14 @@ class FlatPointMazeEnv(gym.Env):
         self.maze_env.close()
 
 
-def point_maze_figures(model: PolicyPredictor, n_episodes: int, seed: int) -> Dict[str, float]:
+def point_maze_figures(model: PolicyPredictor, n_episodes: int, seed: int, env_id: str = POINT_MAZE_ID) -> Dict[str, float]:
     """
-    Evaluates a deterministic policy on ``sb3_mpail/PointMaze-v0`` episodes (``make_vec_env`` seeded with ``seed``).
+    Evaluates a deterministic policy on a flat PointMaze's episodes (``make_vec_env`` seeded with ``seed``).
 
     :param model: anything with SB3's ``predict`` (a trained model or a scripted expert)
     :param n_episodes: number of episodes, run one after the other in one environment
     :param seed: seed of the environment
+    :param env_id: ``sb3_mpail/PointMaze-v0`` or ``sb3_mpail/PointMazeMedium-v0``
     :return: ``return`` (mean episode return), ``success`` (fraction of episodes ending within PointMaze's 0.45 m
         of the goal) and ``wall_steps`` (fraction of steps in which the ball touched a wall)
     """
@@ -141,7 +171,7 @@ def point_maze_figures(model: PolicyPredictor, n_episodes: int, seed: int) -> Di
     def record_wall_contact(info: Dict[str, Any], _: bool) -> None:
         wall_contacts.append(info["wall_contact"])
 
-    episodes = evaluate_episodes(model, POINT_MAZE_ID, n_episodes, seed, n_envs=1, on_step=record_wall_contact)
+    episodes = evaluate_episodes(model, env_id, n_episodes, seed, n_envs=1, on_step=record_wall_contact)
     return {
         "return": episodes.mean_return,
         "success": float(np.mean([info["success"] for info in episodes.final_infos])),

@@ -167,18 +167,20 @@ def maze_walls(env: Any, margin: float = 0.1, weight: float = 100.0, x_index: in
     )
 
 
-def point_maze_walls(margin: float = 0.1, weight: float = 100.0) -> RectangleObstacles:
+def point_maze_walls(margin: float = 0.1, weight: float = 100.0, env_id: str = "sb3_mpail/PointMaze-v0") -> RectangleObstacles:
     """
-    ``sb3_mpail/PointMaze-v0``'s walls (:func:`maze_walls` of the U-maze; needs the ``scenarios`` extra).
+    A flat PointMaze's walls (:func:`maze_walls` of ``sb3_mpail/PointMaze-v0``'s U-maze, or of ``env_id``'s maze;
+    needs the ``scenarios`` extra).
 
     :param margin: how far around each wall the cost reaches, in metres (the ball's radius: 0.1 m)
     :param weight: the cost at the edge
+    :param env_id: the maze env's id
     """
     import gymnasium as gym
 
-    import sb3_mpail.envs  # noqa: F401  (registers sb3_mpail/PointMaze-v0)
+    import sb3_mpail.envs  # noqa: F401  (registers the flat PointMazes)
 
-    env = gym.make("sb3_mpail/PointMaze-v0")
+    env = gym.make(env_id)
     walls = maze_walls(env, margin=margin, weight=weight)
     env.close()
     return walls
@@ -283,6 +285,7 @@ def highway_traffic_vehicles(lanes_count: int = 3, margin: Tuple[float, float] =
 CONSTRAINT_COSTS: Dict[str, Callable[[], nn.Module]] = {
     "parking_walls": parking_walls,
     "point_maze_walls": point_maze_walls,
+    "point_maze_medium_walls": functools.partial(point_maze_walls, env_id="sb3_mpail/PointMazeMedium-v0"),
     "highway_traffic_vehicles": highway_traffic_vehicles,
     "highway_traffic_dense_vehicles": functools.partial(highway_traffic_vehicles, lanes_count=4),
 }

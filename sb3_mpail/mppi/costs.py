@@ -7,6 +7,7 @@ is the learned ``V_phi``, so both are thin views of networks the algorithm train
 
 import math
 import numbers
+from collections import deque
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -476,6 +477,107 @@ def lap_demo_path() -> List[np.ndarray]:
 NAMED_LANES: Dict[str, Callable[[], List[np.ndarray]]] = {"racetrack": racetrack_lanes, "lap_demo": lap_demo_path}
 
 
+def maze_shortest_paths(maze_map: Sequence[Sequence[Any]]) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Shortest paths between a maze's cells, by breadth-first search from each free goal cell over the free cells,
+    4-connected. A wall cell steps to its nearest neighbour (a state the planner imagines inside a wall still has a
+    way out); cells with no way to the goal keep themselves as next, a path of ``n_cells`` steps.
+
+    :param maze_map: rows of cells, ``1`` for a wall (anything else, gymnasium-robotics' ``0``, ``"r"`` or ``"g"``, is free)
+    :return: ``next_cell[cell, goal]``, the next cell on a shortest path (flat indices ``row * n_columns + column``;
+        the goal itself at the goal), and ``steps[cell, goal]``, the path's number of steps
+    """
+    n_rows, n_columns = len(maze_map), len(maze_map[0])
+    n_cells = n_rows * n_columns
+    wall = np.array([[cell == 1 for cell in row] for row in maze_map]).reshape(-1)
+    next_cell = np.tile(np.arange(n_cells)[:, None], (1, n_cells))
+    steps = np.full((n_cells, n_cells), n_cells)
+    for goal in np.flatnonzero(~wall):
+        steps[goal, goal], frontier = 0, deque([goal])
+        while frontier:
+            cell = frontier.popleft()
+            row, column = divmod(int(cell), n_columns)
+            for row_step, column_step in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+                if not (0 <= row + row_step < n_rows and 0 <= column + column_step < n_columns):
+                    continue
+                neighbour = cell + row_step * n_columns + column_step
+                # a free cell is entered only from a free cell; a wall cell leaves to anything
+                if steps[neighbour, goal] == n_cells and (wall[neighbour] or not wall[cell]):
+                    steps[neighbour, goal], next_cell[neighbour, goal] = steps[cell, goal] + 1, cell
+                    frontier.append(neighbour)
+    return next_cell, steps
+
+
+class MazeFrameFeatures(IndexPairFeatures):
+    """
+    A goal-conditioned state in a maze seen along the maze's shortest path to the goal: the offset to the next
+    waypoint (the centre of the next cell on a shortest path through free cells; the goal itself from the goal's cell
+    and the cells next to it), the path length left to the goal (the offset's length plus the cells beyond the
+    waypoint) and the velocity. Every start and goal then look alike to a discriminator, which learns "follow the
+    path"; from the goal's offset it would learn the straight line, which the walls block. The map is what a
+    designer knows, like a road's lanes.
+
+    :param maze_map: rows of cells, ``1`` for a wall; or a map's name (:func:`sb3_mpail.envs.maze.named_maze_map`:
+        ``"u_maze_fixed"``, ``"medium"``)
+    :param position: the state indices of the position ``(x, y)``
+    :param goal_position: the indices of the goal's position
+    :param velocity: the indices of the velocity ``(vx, vy)``; ``None``: no velocity features
+    :param cell_size: a cell's side (gymnasium-robotics' ``maze_size_scaling``), in the state's units; the map is
+        centred on the origin, its rows running down ``y``
+    :param position_scale: factor on the offset and path length
+    :param name: the setting it was given as, which error messages name
+    """
+
+    def __init__(
+        self,
+        maze_map: Union[str, Sequence[Sequence[Any]]],
+        position: Sequence[int],
+        goal_position: Sequence[int],
+        velocity: Sequence[int] | None = None,
+        cell_size: float = 1.0,
+        position_scale: float = 1.0,
+        name: str = "maze_frame",
+    ):
+        pairs = dict(position=position, goal_position=goal_position)
+        if velocity is not None:
+            pairs["velocity"] = velocity
+        super().__init__(pairs, dict(cell_size=cell_size, position_scale=position_scale), name)
+        if isinstance(maze_map, str):
+            from sb3_mpail.envs.maze import named_maze_map  # the envs need gymnasium; imported where a name is given
+
+            maze_map = named_maze_map(maze_map)
+        if not (isinstance(maze_map, Sequence) and maze_map and len({len(row) for row in maze_map}) == 1):
+            raise ValueError(f"{name}['maze_map'] must be rows of cells of one length (1 for a wall); got {maze_map!r}.")
+        next_cell, steps = maze_shortest_paths(maze_map)
+        n_rows, n_columns = len(maze_map), len(maze_map[0])
+        rows, columns = np.divmod(np.arange(n_rows * n_columns), n_columns)
+        centres = np.stack([(columns + 0.5 - n_columns / 2), (n_rows / 2 - rows - 0.5)], axis=1) * cell_size
+        self.register_buffer("cell_centres", th.as_tensor(centres, dtype=th.float32), persistent=False)
+        self.register_buffer("next_cell", th.as_tensor(next_cell), persistent=False)
+        self.register_buffer("steps", th.as_tensor(steps, dtype=th.float32), persistent=False)
+        self.shape, self.cell_size, self.position_scale = (n_rows, n_columns), float(cell_size), float(position_scale)
+
+    def cell_of(self, positions: th.Tensor) -> th.Tensor:
+        """Each position's flat cell index (clamped to the map)."""
+        n_rows, n_columns = self.shape
+        row = th.floor(n_rows / 2 - positions[:, 1] / self.cell_size).long().clamp(0, n_rows - 1)
+        column = th.floor(positions[:, 0] / self.cell_size + n_columns / 2).long().clamp(0, n_columns - 1)
+        return row * n_columns + column
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        positions, goals = states[:, self.indices["position"]], states[:, self.indices["goal_position"]]
+        cell, goal_cell = self.cell_of(positions), self.cell_of(goals)
+        next_cell = self.next_cell[cell, goal_cell]
+        at_goal = self.steps[next_cell, goal_cell] == 0  # in the goal's cell or next to it: make for the goal itself
+        waypoints = th.where(at_goal.unsqueeze(1), goals, self.cell_centres[next_cell])
+        offsets = waypoints - positions
+        path_left = offsets.norm(dim=1) + self.steps[next_cell, goal_cell] * self.cell_size
+        columns = [self.position_scale * offsets, self.position_scale * path_left.unsqueeze(1)]
+        if "velocity" in self.indices:
+            columns.append(states[:, self.indices["velocity"]])
+        return th.cat(columns, dim=1)
+
+
 class FeatureChain(nn.Sequential):
     """
     Feature maps applied one after the other, e.g. the state dimensions a partial demo holds, then a lane frame of
@@ -509,8 +611,9 @@ class FeatureMap(nn.Module):
         """
         The module itself, a :class:`FeatureSelection` of state indices, :class:`AngleFeatures` for ``{"angles":
         [indices]}``, :class:`GoalFrameFeatures` for ``{"goal_frame": {its settings}}``, :class:`LaneFrameFeatures` for
-        ``{"lane_frame": {its settings}}``, a :class:`FeatureChain` for ``{"chain": [map, map, ...]}`` (forms a YAML
-        hyperparameter file can hold), or a function wrapped in a :class:`FeatureMap`.
+        ``{"lane_frame": {its settings}}``, :class:`MazeFrameFeatures` for ``{"maze_frame": {its settings}}``, a
+        :class:`FeatureChain` for ``{"chain": [map, map, ...]}`` (forms a YAML hyperparameter file can hold), or a
+        function wrapped in a :class:`FeatureMap`.
 
         :param features: the feature map as given
         :param name: the setting it was given as (``discriminator_features`` or ``value_features``), which error
@@ -530,10 +633,12 @@ class FeatureMap(nn.Module):
                 return GoalFrameFeatures(**features["goal_frame"], name=f"{name}['goal_frame']")
             if set(features) == {"lane_frame"} and isinstance(features["lane_frame"], Mapping):
                 return LaneFrameFeatures(**features["lane_frame"], name=f"{name}['lane_frame']")
+            if set(features) == {"maze_frame"} and isinstance(features["maze_frame"], Mapping):
+                return MazeFrameFeatures(**features["maze_frame"], name=f"{name}['maze_frame']")
             raise ValueError(
                 f"A dict of {name} takes one key, 'angles' (a list of indices), 'goal_frame' (a dict of "
-                f"GoalFrameFeatures' settings), 'lane_frame' (LaneFrameFeatures') or 'chain' (a list of maps applied "
-                f"in turn); got {dict(features)}."
+                f"GoalFrameFeatures' settings), 'lane_frame' (LaneFrameFeatures'), 'maze_frame' (MazeFrameFeatures') "
+                f"or 'chain' (a list of maps applied in turn); got {dict(features)}."
             )
         if isinstance(features, Sequence) and not isinstance(features, str):
             return FeatureSelection(features, name)

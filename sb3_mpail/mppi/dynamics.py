@@ -655,6 +655,7 @@ DEFAULT_DYNAMICS: Dict[str, str] = {
     "sb3_mpail/Navigation-v0": "bicycle",
     "sb3_mpail/Parking-v0": "parking",
     "sb3_mpail/PointMaze-v0": "point_mass",
+    "sb3_mpail/PointMazeMedium-v0": "point_mass",
 }
 #: per model chosen automatically (:data:`DEFAULT_DYNAMICS`), its keyword arguments read from the env's attributes
 #: (keyword: attribute), so that the model plans with the env's own physics (``Pendulum-v1``'s ``g``)
