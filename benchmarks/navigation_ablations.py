@@ -22,6 +22,7 @@ Usage::
 import argparse
 import json
 import multiprocessing
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -31,7 +32,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence
 import numpy as np
 import torch as th
 
-from benchmarks.report import DETERMINISTIC_NOISE, SAME_NOISE, machine_description, machines_of, write_section
+from benchmarks.report import DETERMINISTIC_NOISE, SAME_NOISE, commands_of, machine_description, machines_of, write_section
 from benchmarks.runner import (
     CIRCLING_YAW_RATE,
     GOAL_RADIUS,
@@ -212,12 +213,19 @@ def result_path(variant: str, seed: int, results_dir: Path = RESULTS_DIR) -> Pat
     return Path(results_dir) / f"{variant}_seed{seed}.json"
 
 
-def run_variant(name: str, seed: int, results_dir: Path = RESULTS_DIR, models_dir: Path = MODELS_DIR) -> Path:
+#: what the report quotes for the runs stored before each run recorded its command: their variants and seeds are the table's
+UNRECORDED_COMMAND = "python -m benchmarks.navigation_ablations --variants <variant> --seeds <seeds>"
+
+
+def run_variant(
+    name: str, seed: int, command: str, results_dir: Path = RESULTS_DIR, models_dir: Path = MODELS_DIR
+) -> Path:
     """
     Trains one variant on one seed, evaluates it and writes its result (skipped when the file exists).
 
     :param name: a key of :data:`VARIANTS`
     :param seed: training seed
+    :param command: the command line that asked for it, quoted by the report
     :return: the result file
     """
     path = result_path(name, seed, results_dir)
@@ -234,7 +242,8 @@ def run_variant(name: str, seed: int, results_dir: Path = RESULTS_DIR, models_di
     result = dict(
         variant=name, seed=seed, question=variant.question, counts=variant.counts, demos=variant.demos,
         timesteps=variant.timesteps, n_envs=variant.n_envs, train_seconds=round(train_seconds, 1),
-        machine=machine_description(), deterministic_noise=DETERMINISTIC_NOISE, **evaluation(model, variant, seed),
+        machine=machine_description(), deterministic_noise=DETERMINISTIC_NOISE, command=command,
+        **evaluation(model, variant, seed),
     )  # fmt: skip
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(result))
@@ -274,13 +283,13 @@ def evaluation_noise(run: Dict[str, Any]) -> Optional[str]:
     return run["reevaluated"]["deterministic_noise"] if "reevaluated" in run else run.get("deterministic_noise")
 
 
-def report(results_dir: Path, names: Sequence[str], command: str) -> str:
+def report(results_dir: Path, names: Sequence[str]) -> str:
     """
-    The ``navigation-ablations`` section: per variant, means and 95% CIs over its seeds.
+    The ``navigation-ablations`` section: per variant, means and 95% CIs over its seeds, with the command lines that
+    made the runs.
 
     :param results_dir: where the results are
     :param names: the variants, in table order
-    :param command: the command line to quote
     """
     columns = ("id_score", "reached_reachable", "final_reward", "progress", "circling")
     ceiling = ood_measures(true_reward_record(N_OOD_STARTS, Path(results_dir).parent))
@@ -325,7 +334,9 @@ def report(results_dir: Path, names: Sequence[str], command: str) -> str:
         lines += ["", "Not trained as the paper trains (reported apart; these never count for the OOD target):", "",
                   *header, *rows[False]]  # fmt: skip
     reevaluated = [f"`{run['variant']}` seed {run['seed']}" for run in every_run if "reevaluated" in run]
-    lines += ["", f"Command: `{command}` on {machines_of(every_run)}."]
+    commands = commands_of(every_run, unrecorded=UNRECORDED_COMMAND)
+    lines += ["", f"Command{'s' if len(commands) > 1 else ''}: " + "; ".join(f"`{command}`" for command in commands)
+              + f" on {machines_of(every_run)}."]  # fmt: skip
     if any(evaluation_noise(run) == SAME_NOISE for run in every_run):
         lines += ["", "†: runs evaluated by a version whose deterministic planning drew the same samples at every step "
                       "(a worse planner); `--reevaluate` scores their saved models again."]  # fmt: skip
@@ -358,14 +369,13 @@ def main() -> None:
                 if not result_path(name, seed, args.results_dir).exists()]  # fmt: skip
         print(f"{len(jobs)} runs to do", flush=True)
         with ProcessPoolExecutor(max(1, args.workers), mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = [pool.submit(run_variant, name, seed, args.results_dir) for name, seed in jobs]
+            command = "python -m benchmarks.navigation_ablations " + " ".join(sys.argv[1:])
+            futures = [pool.submit(run_variant, name, seed, command, args.results_dir) for name, seed in jobs]
             for future in futures:
                 print("wrote", future.result(), flush=True)
     th.set_num_threads(1)  # the runs' setting, quoted in the report
     names = [name for name in VARIANTS if name in args.variants or any(Path(args.results_dir).glob(f"{name}_seed*.json"))]
-    seeds = " ".join(map(str, args.seeds))
-    command = f"python -m benchmarks.navigation_ablations --seeds {seeds}"
-    write_section("navigation-ablations", report(args.results_dir, names, command))
+    write_section("navigation-ablations", report(args.results_dir, names))
 
 
 if __name__ == "__main__":

@@ -273,13 +273,28 @@ def test_a_navigation_ablation_scored_by_the_same_samples_planner_is_marked_unti
         (tmp_path / f"concave-value_seed{seed}.json").write_text(json.dumps(run))
     monkeypatch.setattr(navigation_ablations, "true_reward_record", lambda n_starts, results_dir: {})
     monkeypatch.setattr(navigation_ablations, "ood_measures", lambda record: dict(figures, reached_reachable=0.95))
-    assert "| 2 (2 †) |" in navigation_ablations.report(tmp_path, ["concave-value"], "cmd")
+    assert "| 2 (2 †) |" in navigation_ablations.report(tmp_path, ["concave-value"])
     monkeypatch.setattr(navigation_ablations.MPAIL, "load", lambda path, device: "model")
     monkeypatch.setattr(navigation_ablations, "evaluation", lambda model, variant, seed: {})
     (tmp_path / "concave-value_seed1.zip").write_text("a saved model")
     navigation_ablations.reevaluate_variant("concave-value", 1, tmp_path, tmp_path)
-    text = navigation_ablations.report(tmp_path, ["concave-value"], "cmd")
+    text = navigation_ablations.report(tmp_path, ["concave-value"])
     assert "| 2 (1 †) |" in text and "†: runs evaluated by a version whose deterministic planning drew the same" in text
+
+
+def test_the_navigation_ablations_report_quotes_each_runs_own_command(tmp_path, monkeypatch):
+    from benchmarks import navigation_ablations
+
+    figures = dict(id_score=0.9, reached_reachable=0.3, final_reward=7.0, progress=0.5, circling=0.2, machine="A")
+    commands = {0: "python -m benchmarks.navigation_ablations --variants concave-value --seeds 0", 1: None}
+    for seed, command in commands.items():
+        run = dict(figures, variant="concave-value", seed=seed, **({"command": command} if command else {}))
+        (tmp_path / f"concave-value_seed{seed}.json").write_text(json.dumps(run))
+    monkeypatch.setattr(navigation_ablations, "true_reward_record", lambda n_starts, results_dir: {})
+    monkeypatch.setattr(navigation_ablations, "ood_measures", lambda record: dict(figures, reached_reachable=0.95))
+    text = navigation_ablations.report(tmp_path, ["concave-value"])
+    # the run that recorded its command is quoted as it ran; the one stored before the record, as the placeholder
+    assert f"`{commands[0]}`" in text and f"`{navigation_ablations.UNRECORDED_COMMAND}`" in text
 
 
 def test_every_scenario_names_its_experts_figures_from_its_shipped_demo_information():
