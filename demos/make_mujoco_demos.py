@@ -81,11 +81,14 @@ class KeepBest(BaseCallback):
     :param n_episodes: Episodes per score.
     :param seed: Seed of the scoring env's first reset.
     :param seconds: Wall-clock budget, or ``None``.
+    :param save_path: Where each new best is saved as it is found (so an interrupted run can ``--resume``), or ``None``.
     """
 
-    def __init__(self, env_id: str, eval_freq: int, n_episodes: int, seed: int, seconds: Optional[float]):
+    def __init__(self, env_id: str, eval_freq: int, n_episodes: int, seed: int, seconds: Optional[float],
+                 save_path: Optional[Path] = None):
         super().__init__()
         self.env_id, self.eval_freq, self.n_episodes, self.seed, self.seconds = env_id, eval_freq, n_episodes, seed, seconds
+        self.save_path = save_path
         self.best_return = -np.inf
         self.best_step = 0
         self.best_state: Optional[dict[str, Any]] = None
@@ -101,6 +104,8 @@ class KeepBest(BaseCallback):
             if mean_return > self.best_return:
                 self.best_return, self.best_step = mean_return, self.num_timesteps
                 self.best_state = {k: v.clone() for k, v in self.model.policy.state_dict().items()}
+                if self.save_path is not None:
+                    self.model.save(self.save_path)
         return self.seconds is None or time.perf_counter() - self.start < self.seconds
 
 
@@ -127,7 +132,7 @@ def main() -> None:
         model = algo.load(args.resume, env, **settings)
         model.learning_starts = model.num_timesteps + args.batch_warmup
     keep_best = KeepBest(args.env, args.eval_freq, args.n_eval_checkpoint, args.seed + 3,
-                         None if args.max_minutes is None else 60 * args.max_minutes)
+                         None if args.max_minutes is None else 60 * args.max_minutes, args.save_expert)
     start = time.perf_counter()
     if not args.record_only:
         model.learn(total_timesteps=args.timesteps, callback=keep_best, reset_num_timesteps=args.resume is None)
