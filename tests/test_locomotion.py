@@ -12,7 +12,7 @@ pytest.importorskip("mujoco", reason="the MuJoCo tasks need mujoco (the scenario
 #: rl_zoo3's published returns that a shipped expert must come near to be called an expert
 EXPERT_RETURNS = {"Hopper-v4": 2500, "Walker2d-v4": 3000, "HalfCheetah-v4": 4000, "Ant-v4": 2000}
 #: the tasks whose demos the package ships
-SHIPPED_TASKS = ["Hopper-v4", "Walker2d-v4", "HalfCheetah-v4"]
+SHIPPED_TASKS = ["Hopper-v4", "Walker2d-v4", "HalfCheetah-v4", "Ant-v4"]
 
 
 class ForwardLean:
