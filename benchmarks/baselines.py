@@ -848,12 +848,15 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
     if not sizes:
         raise FileNotFoundError(f"No {name}_<n> demo set is shipped ({', '.join(list_shipped_demos())}).")
     episodes = [trajectory.obs for trajectory in shipped_demos(name, max(sizes))]
-    if env_id in LOCOMOTION_TASKS:
-        # chaotic: float noise between machines grows to metres within 50 steps of an open-loop replay, so the replay
-        # checks each demo's first step (the right expert) and the expert labels the shipped observations themselves
+    if env_id in LOCOMOTION_TASKS or name in ("pointmaze", "pointmaze_medium"):
+        # MuJoCo: float noise between machines and MuJoCo versions grows within an open-loop replay (to metres within 50
+        # steps on the walkers, to centimetres over 200 steps of the maze's wall contacts), so the replay checks each
+        # demo's first step (the right expert) and the expert, acting on the observation alone, labels the shipped
+        # observations themselves
         experts = _demo_experts(name, env_id, gym_env, expert_path, len(episodes))
         reproduced = [_replay(gym_env, act, seed, 1)[0] for seed, act in experts]
-        actions = [np.asarray(act(episode[:-1]), np.float32) for (_, act), episode in zip(experts, episodes)]
+        actions = [np.stack([act(obs) for obs in episode[:-1]]).astype(np.float32)
+                   for (_, act), episode in zip(experts, episodes)]
     elif name in REPLAYED_EXPERTS:
         experts = _demo_experts(name, env_id, gym_env, expert_path, len(episodes))
         replays = [_replay(gym_env, act, seed, len(episode) - 1) for (seed, act), episode in zip(experts, episodes)]
