@@ -825,13 +825,15 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
     MuJoCo locomotion (``hopper``, ``walker2d``, ``halfcheetah``, ``ant_v4``): the TD3 or SAC expert that
     ``demos/make_mujoco_demos.py --save-expert`` saved (``expert_path``) is checked on the first step of each demo from
     its start seed, then labels the shipped observations with its actions (a whole open-loop replay diverges between
-    machines: these bodies are chaotic, and float noise grows to metres within 50 steps). Navigation:
+    machines: these bodies are chaotic, and float noise grows to metres within 50 steps). The point mazes
+    (``pointmaze``, ``pointmaze_medium``) alike, with ``demos/make_maze_demos.py``'s graph expert (MuJoCo versions'
+    wall contacts drift apart by centimetres over an episode). Navigation:
     replays the PPO expert that ``demos/make_navigation_demos.py`` saved (``expert_path``; rerunning that
     script retrains the same expert bit for bit on this stack) from the demos' start seeds. Pendulum and cartpole:
     the actions are recovered from the shipped observations by inverting the env's known dynamics
     (:func:`pendulum_actions`, :func:`cartpole_actions`), so no expert is needed; every step is checked against the
-    exact model. Highway in traffic, the point maze, the racetrack, the highway without traffic and parking: replays the
-    scripted expert of ``demos/make_highway_traffic_demos.py`` (highway-env's IDM/MOBIL driver), ``demos/make_maze_demos.py``,
+    exact model. Highway in traffic, the racetrack, the highway without traffic and parking: replays the
+    scripted expert of ``demos/make_highway_traffic_demos.py`` (highway-env's IDM/MOBIL driver),
     ``demos/make_racetrack_demos.py`` (highway-env's lane keeping) or ``demos/make_parking_demos.py`` (MPPI on the exact
     model, its episodes rerun in order: :func:`_parking_demo_actions`) from the demos' reset seeds.
 
