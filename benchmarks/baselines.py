@@ -721,6 +721,10 @@ def _parking_demo_actions(n_episodes: int) -> List[Tuple[int, List[np.ndarray]]]
     return demos
 
 
+#: the MuJoCo point mazes, whose demos the graph expert of demos/make_maze_demos.py made
+POINT_MAZE_DEMO_SETS = ("pointmaze", "pointmaze_medium")
+
+
 def _stateless_expert(
     name: str, env_id: str, env: gym.Env, expert_path: Optional[Path]
 ) -> Optional[Callable[[np.ndarray], np.ndarray]]:
@@ -732,7 +736,7 @@ def _stateless_expert(
         algo = _demo_script("make_mujoco_demos").EXPERT_ALGOS[shipped_demo_info(name)["expert_algo"].lower()]
         expert = algo.load(expert_path, device="cpu")
         return lambda obs: expert.predict(obs, deterministic=True)[0]
-    if name in ("pointmaze", "pointmaze_medium"):  # the next cell follows from the ball's and the goal's positions
+    if name in POINT_MAZE_DEMO_SETS:  # the next cell follows from the ball's and the goal's positions
         return _demo_script("make_maze_demos").MazeGraphExpert(env).action
     if name in ("racetrack", "highway"):  # highway-env's lane (and speed) control of the observed car
         script = _demo_script("make_racetrack_demos")
@@ -850,7 +854,7 @@ def make_action_demos(env: str, expert_path: Optional[Path] = None, out_dir: Pat
     if not sizes:
         raise FileNotFoundError(f"No {name}_<n> demo set is shipped ({', '.join(list_shipped_demos())}).")
     episodes = [trajectory.obs for trajectory in shipped_demos(name, max(sizes))]
-    if env_id in LOCOMOTION_TASKS or name in ("pointmaze", "pointmaze_medium"):
+    if env_id in LOCOMOTION_TASKS or name in POINT_MAZE_DEMO_SETS:
         # MuJoCo: float noise between machines and MuJoCo versions grows within an open-loop replay (to metres within 50
         # steps on the walkers, to centimetres over 200 steps of the maze's wall contacts), so the replay checks each
         # demo's first step (the right expert) and the expert, acting on the observation alone, labels the shipped
