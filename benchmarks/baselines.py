@@ -715,7 +715,7 @@ def _parking_demo_actions(n_episodes: int) -> List[Tuple[int, List[np.ndarray]]]
     demo_env = gym.make(script.ENV_ID, config={"success_goal_reward": 0.0})  # as the script records: no early end
     recorder, demos, seed = _RecordedExpert(expert), [], script.DEMO_SEED_OFFSET
     while len(demos) < n_episodes:
-        if script.run_episode(demo_env, seed, recorder, float(option["stopped_speed"]))[2]:
+        if script.run_episode(demo_env, seed, recorder, float(option["stopped_speed"]), int(option["hold_steps"]))[2]:
             demos.append((seed, recorder.actions))
         seed += 1
     return demos

@@ -10,13 +10,14 @@ velocity (parking-v0's reward has 0 there, so its expert arrives moving) and the
 It evaluates the expert and a uniform-random policy on ``--eval-episodes`` seeded episodes of the stock env (success
 as parking-v0 judges it, crashes), then records ``--n-demos`` episodes in which the expert parks and stops (reset
 seeds 1000, 1001, ...; seeds of episodes in which it did not are listed in the metadata and skipped): those episodes
-run in the same env without its early end on success and stop once the car is parked by parking-v0's test and slower
-than ``--stopped-speed``. It keeps only the observations and writes ``<out-dir>/parking_<n>.npz`` (``obs`` 2-D with
-``episode_lengths``) and ``<out-dir>/parking.json``. Needs the ``scenarios`` extra.
+run in the same env without its early end on success, until the car is parked by parking-v0's test and slower than
+``--stopped-speed``, then for ``--hold-steps`` more steps in which the expert stays parked (the demos then show where a
+car stops, as often as a car stays there). It keeps only the observations and writes ``<out-dir>/parking_<n>.npz``
+(``obs`` 2-D with ``episode_lengths``) and ``<out-dir>/parking.json``. Needs the ``scenarios`` extra.
 
 Run from the repository root::
 
-    python demos/make_parking_demos.py --n-demos 4 --eval-episodes 10
+    python demos/make_parking_demos.py --n-demos 16 --eval-episodes 20 --stop-weight 0.01 --hold-steps 100  # the shipped set
 """
 
 from __future__ import annotations
@@ -98,7 +99,7 @@ def parked_and_stopped(observation: np.ndarray, stopped_speed: float) -> bool:
 
 
 def run_episode(
-    env: gym.Env, seed: int, policy, stopped_speed: float | None = None
+    env: gym.Env, seed: int, policy, stopped_speed: float | None = None, hold_steps: int = 0
 ) -> tuple[list[np.ndarray], float, bool, bool]:
     """
     One episode from ``env.reset(seed=seed)``.
@@ -107,6 +108,7 @@ def run_episode(
     :param seed: reset seed
     :param policy: observation -> action, or None for uniform-random actions
     :param stopped_speed: end the episode once the car is parked and slower than this (m/s); ``None``: the env's ends
+    :param hold_steps: steps the policy goes on for once the car is parked (and stopped, with ``stopped_speed``)
     :return: the observations, the return, whether the car parked (stopped, with ``stopped_speed``) and whether it crashed
     """
     observation, _ = env.reset(seed=seed)
@@ -114,14 +116,17 @@ def run_episode(
     observations, episode_return = [observation], 0.0
     if policy is not None:
         policy.reset()
+    parked_at = None
     while True:
         action = env.action_space.sample() if policy is None else policy(observation)
         observation, reward, terminated, truncated, info = env.step(action)
         observations.append(observation)
         episode_return += reward
         parked = info["is_success"] if stopped_speed is None else parked_and_stopped(observation, stopped_speed)
-        if terminated or truncated or parked:
-            return observations, episode_return, bool(parked), bool(info["crashed"])
+        if parked and parked_at is None:
+            parked_at = len(observations)
+        if terminated or truncated or (parked_at is not None and len(observations) - parked_at >= hold_steps):
+            return observations, episode_return, parked_at is not None, bool(info["crashed"])
 
 
 def main() -> None:
@@ -130,6 +135,7 @@ def main() -> None:
     parser.add_argument("--eval-episodes", type=int, default=10)
     parser.add_argument("--stop-weight", type=float, default=0.05)
     parser.add_argument("--stopped-speed", type=float, default=0.2)
+    parser.add_argument("--hold-steps", type=int, default=0)
     parser.add_argument("--samples", type=int, default=256)
     parser.add_argument("--horizon", type=int, default=15)
     parser.add_argument("--iterations", type=int, default=3)
@@ -149,7 +155,7 @@ def main() -> None:
     random_runs = [run_episode(env, seed, None) for seed in range(args.eval_episodes)]
     demos, failed_demo_seeds, seed = [], [], DEMO_SEED_OFFSET
     while len(demos) < args.n_demos:
-        run = run_episode(demo_env, seed, expert, args.stopped_speed)
+        run = run_episode(demo_env, seed, expert, args.stopped_speed, args.hold_steps)
         if run[2]:
             demos.append(run)
         else:
@@ -164,8 +170,8 @@ def main() -> None:
     )
     command = "python demos/make_parking_demos.py " + " ".join(
         f"--{name.replace('_', '-')} {getattr(args, name)}"
-        for name in ("n_demos", "eval_episodes", "stop_weight", "stopped_speed", "samples", "horizon", "iterations",
-                     "noise", "temperature", "seed")  # fmt: skip
+        for name in ("n_demos", "eval_episodes", "stop_weight", "stopped_speed", "hold_steps", "samples", "horizon",
+                     "iterations", "noise", "temperature", "seed")  # fmt: skip
     )
     metadata = {
         "env_id": ENV_ID,
@@ -184,6 +190,7 @@ def main() -> None:
         "demo_returns": [run[1] for run in demos],
         "failed_demo_seeds": failed_demo_seeds,
         "demo_lengths": [len(run[0]) - 1 for run in demos],
+        "demo_hold_steps": args.hold_steps,
         "command": command,
         "seconds": round(time.time() - start, 1),
     }

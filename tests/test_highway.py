@@ -9,7 +9,7 @@ import pytest
 import torch as th
 
 import sb3_mpail.envs  # noqa: F401  (registers the environments)
-from sb3_mpail.demos import SHIPPED_DEMO_DIR
+from sb3_mpail.demos import SHIPPED_DEMO_DIR, shipped_demo_info
 from sb3_mpail.mppi import DEFAULT_DYNAMICS, ParkingKinematics, make_dynamics
 from sb3_mpail.mppi.reference import rollout as rollout_step_by_step
 
@@ -159,16 +159,19 @@ def test_parking_env_refuses_an_observation_its_model_cannot_decode():
         gym.make(PARKING_ID, config=config)
 
 
-def test_shipped_parking_demos_end_parked_and_stopped_in_different_slots():
+def test_shipped_parking_demos_park_stop_and_stay_parked_in_different_slots():
     with np.load(SHIPPED_DEMO_DIR / "parking_16.npz") as data:
         episodes = np.split(data["obs"], np.cumsum(data["episode_lengths"])[:-1])
-    assert len(episodes) == 16
+    hold_steps = shipped_demo_info("parking")["demo_hold_steps"]
+    assert len(episodes) == 16 and hold_steps > 0
     for episode in episodes:
         assert episode.shape[1] == 12
-        last = episode[-1].astype(np.float64)
+        states = episode.astype(np.float64)
         # parking-v0's success test: weighted L1 distance to the goal, to the power 0.5, below 0.12
-        distance = np.abs(last[:6] - last[6:]) @ np.array([1, 0.3, 0, 0, 0.02, 0.02])
-        assert distance**0.5 < 0.12
-        assert np.hypot(last[2], last[3]) * 5 < 0.2  # stopped: below 0.2 m/s (velocities are in units of 5 m/s)
+        parked = (np.abs(states[:, :6] - states[:, 6:]) @ np.array([1, 0.3, 0, 0, 0.02, 0.02])) ** 0.5 < 0.12
+        stopped = np.hypot(states[:, 2], states[:, 3]) * 5 < 0.2  # below 0.2 m/s (velocities are in units of 5 m/s)
+        arrived = int(np.argmax(parked & stopped))
+        assert parked[arrived] and stopped[arrived]
+        assert len(episode) - 1 - arrived == hold_steps and parked[arrived:].all()  # then it stays parked
         assert np.abs(episode[0, :2] - episode[0, 6:8]).max() > 0.05  # started more than 5 m from the goal
     assert len({tuple(np.round(episode[0, 6:8], 3)) for episode in episodes}) >= 8  # goal slots drawn at random
