@@ -278,7 +278,7 @@ SCENARIOS: Dict[str, Scenario] = {
     "parking": Scenario(
         "sb3_mpail/Parking-v0",
         "parking",
-        "highway-env parking-v0 (walls on) from 16 scripted-expert demos that stop in the slot (observations only)",
+        "highway-env parking-v0 (walls on) from 16 scripted-expert demos that stop in the slot and stay (observations only)",
         parking_figures,
         (("success", "success rate"), ("crashed", "crash rate"), ("return", "return"), ("score", "normalised score")),
         parking_reference,
