@@ -672,7 +672,7 @@ def _demo_script(name: str) -> Any:
 
 
 #: the shipped sets whose expert is replayed from the demos' reset seeds, besides the MuJoCo tasks' (:func:`_demo_experts`)
-REPLAYED_EXPERTS = ("navigation", "highway_traffic", "pointmaze", "pointmaze_medium", "racetrack", "highway", "parking")
+REPLAYED_EXPERTS = ("navigation", "highway_traffic", "racetrack", "highway", "parking")
 
 
 class _RecordedExpert:
