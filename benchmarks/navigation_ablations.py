@@ -152,6 +152,10 @@ VARIANTS: Dict[str, Variant] = {
         "10 discriminators, the cost their mean logit less their standard deviation (does a larger ensemble help more?)",
         lambda: dict(discriminator_ensemble_size=10, discriminator_disagreement=1.0),
     ),
+    "discriminator-ensemble-disagreement-2": Variant(
+        "5 discriminators, the cost their mean logit less twice their standard deviation (a stronger OOD penalty)",
+        lambda: dict(discriminator_ensemble_size=5, discriminator_disagreement=2.0),
+    ),
     "discriminator-ensemble-standardised": Variant(
         "both: the 5-discriminator ensemble with its disagreement term and the standardised inputs",
         lambda: dict(standardised_headings(), discriminator_ensemble_size=5, discriminator_disagreement=1.0),
