@@ -87,6 +87,10 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         question="the logit plus 2 per step (reward_offset=2): does a larger bonus for staying up help more?",
         changes=dict(policy_kwargs=dict(reward_offset=2.0)),
     ),
+    "alive-bonus-3": dict(
+        question="the logit plus 3 per step (reward_offset=3): does the bonus's gain go on past 2?",
+        changes=dict(policy_kwargs=dict(reward_offset=3.0)),
+    ),
     "prior-updates-1": dict(question="one prior update per env step", changes=dict(prior_updates_per_step=1.0)),
     "prior-128": dict(
         question="the prior's actor and Q networks 128 x 128 instead of 256 x 256 (an update takes 0.6x the time)",
