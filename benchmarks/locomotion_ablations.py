@@ -78,6 +78,10 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         "staying up always pays, so a fall forfeits the rest of the episode's reward",
         changes=dict(policy_kwargs=dict(reward_form="softplus")),
     ),
+    "no-alive-bonus": dict(
+        question="no bonus per step alive (reward_offset=0): the learned reward is the logit d alone",
+        changes=dict(policy_kwargs=dict(reward_offset=0.0)),
+    ),
     "alive-bonus": dict(
         question="the logit plus 1 per step (reward_offset=1): the logit's ranking of transitions, with a bonus for "
         "staying up where softplus(d) pays even a confidently non-expert stance",
