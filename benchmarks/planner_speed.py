@@ -6,6 +6,10 @@ plain reference implementation (:mod:`sb3_mpail.mppi.reference`) and with ``pyto
 Every measurement runs in its own subprocess, so thread settings, caches and peak memory do not leak between cases.
 One planning step plans every env once (``J`` iterations); env-steps/s = envs / seconds per planning step.
 
+The ``callable`` cases plan through the bicycle given as a user's plain function, as a user without a built-in model
+gives dynamics: the planner then calls it once per horizon step, as the reference does, and its "vs reference" figure
+compares it with the reference planning through the same function.
+
 ``pytorch_mppi`` (``pip install -e ".[bench]"``) plans one env at a time, so the batched case loops over the envs. It
 gets exactly the same problem: its state is ``[s, s_prev]`` (24-D) so its running cost is the same ``c(s, s') =
 -d(s, s')`` with markup ``eta^t``, its terminal cost is ``-eta^H V(s_H)``, the same noise covariance, bounds, N, H,
@@ -41,11 +45,29 @@ IMPLEMENTATIONS = {
     "cuda-graphs": "sb3-mpail + torch.compile(reduce-overhead) (CUDA graphs)",
     "predict": "sb3-mpail through predict(deterministic=True): checks, lock, fresh noise seed, plan carried",
     "reference": "plain reference implementation",
+    "callable": "sb3-mpail, the bicycle as a user's plain function",
+    "callable-reference": "plain reference implementation, the same plain function",
     "pytorch_mppi": "pytorch_mppi 0.9.1, loop over envs",
 }
+#: the plain implementation each case's "vs reference" compares with (the same dynamics)
+REFERENCE_OF = {"callable": "callable-reference"}
+BASELINES = ("reference", "callable-reference", "pytorch_mppi")
 
 
-def make_policy(device: str, compile_planner: Any = False):
+def user_bicycle() -> Callable[[th.Tensor, th.Tensor], th.Tensor]:
+    """The bicycle's step as a user brings dynamics: a plain function of torch tensors, opaque to the planner."""
+    # imported here: the "torch" case switches the compiled kernels off before sb3_mpail is imported
+    from sb3_mpail.mppi.dynamics import KinematicBicycle
+
+    bicycle = KinematicBicycle()
+
+    def step(states: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        return bicycle(states, actions)
+
+    return step
+
+
+def make_policy(device: str, compile_planner: Any = False, dynamics: Any = "bicycle"):
     """A navigation ``MlpMPPI`` policy at the paper's settings, in eval mode, on ``device``."""
     from sb3_mpail.envs.navigation import NavigationEnv
     from sb3_mpail.policies import MPPIPolicy
@@ -53,7 +75,7 @@ def make_policy(device: str, compile_planner: Any = False):
     env = NavigationEnv()
     th.manual_seed(0)
     policy = MPPIPolicy(
-        env.observation_space, env.action_space, dynamics="bicycle", compile_planner=compile_planner, **PAPER_SETTINGS
+        env.observation_space, env.action_space, dynamics=dynamics, compile_planner=compile_planner, **PAPER_SETTINGS
     ).to(device)
     policy.set_training_mode(False)
     policy.temperature.fill_(TEMPERATURE)
@@ -76,9 +98,9 @@ def planning_step_sb3_mpail(n_envs: int, device: str, implementation: str) -> Ca
         from sb3_mpail.mppi import fused
 
         fused.ONEDNN_LINEAR = None
-    policy = make_policy(device, compile_planner)
+    policy = make_policy(device, compile_planner, user_bicycle() if implementation.startswith("callable") else "bicycle")
     planner = policy.planner
-    plan_once = planner.reference_forward if implementation == "reference" else planner.forward
+    plan_once = planner.reference_forward if implementation.endswith("reference") else planner.forward
     states = random_states(n_envs, device)
     generator = th.Generator(device=device).manual_seed(0)
     plan = planner.initial_plan(n_envs)
@@ -218,7 +240,7 @@ def cases(args: argparse.Namespace) -> List[tuple]:
     planned = []
     for device in args.devices:
         implementations = ["sb3-mpail", "reference"] + (["pytorch_mppi"] if not args.no_pytorch_mppi else [])
-        implementations += ["predict"]
+        implementations += ["predict", "callable", "callable-reference"]
         implementations += ["torch"] if device == "cpu" else []
         implementations += ["blas"] if device == "cpu" and th.backends.mkldnn.is_available() else []
         implementations += ["compiled"] if args.compile else []
@@ -227,7 +249,7 @@ def cases(args: argparse.Namespace) -> List[tuple]:
         for threads in args.threads if device == "cpu" else args.threads[:1]:
             for n_envs in args.envs:
                 for implementation in implementations:
-                    if implementation in ("reference", "pytorch_mppi") and n_envs > args.max_baseline_envs:
+                    if implementation in BASELINES and n_envs > args.max_baseline_envs:
                         continue
                     planned.append((implementation, n_envs, device, threads))
     return planned
@@ -265,9 +287,9 @@ def table(results: List[Dict[str, Any]]) -> str:
     for result in results:
         key = (result["n_envs"], result["device"], result["threads"])
         ratios = []
-        for other in ("reference", "pytorch_mppi"):
+        for other in (REFERENCE_OF.get(result["implementation"], "reference"), "pytorch_mppi"):
             baseline = by_case.get((other, *key))
-            if baseline is None or other == result["implementation"]:
+            if baseline is None or result["implementation"] in (other, "callable-reference"):
                 ratios.append("")
             else:
                 ratios.append(f"{result['env_steps_per_second'] / baseline['env_steps_per_second']:.1f}x")
@@ -292,7 +314,7 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     )
     parser.add_argument("--no-pytorch-mppi", action="store_true")
     parser.add_argument(
-        "--max-baseline-envs", type=int, default=64, help="time the reference and pytorch_mppi only up to this many envs"
+        "--max-baseline-envs", type=int, default=64, help="time the plain implementations only up to this many envs"
     )
     parser.add_argument(
         "--training-steps", type=int, default=4000,
