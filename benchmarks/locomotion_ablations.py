@@ -100,6 +100,10 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         question="the prior's actor and Q networks 128 x 128 instead of 256 x 256 (an update takes 0.6x the time)",
         changes=dict(policy_kwargs=dict(prior_kwargs=dict(net_arch=(128, 128)))),
     ),
+    "prior-quarter": dict(
+        question="a quarter of a prior update per env step (the networks 256 x 256): half the entry's update time",
+        changes=dict(prior_updates_per_step=0.25),
+    ),
     "prior-quarter-128": dict(
         question="a quarter of a prior update per env step and 128 x 128 prior networks: the prior's updates, most of "
         "a run's time, cut to about a third of the entry's",
