@@ -289,7 +289,7 @@ def table(results: List[Dict[str, Any]]) -> str:
         ratios = []
         for other in (REFERENCE_OF.get(result["implementation"], "reference"), "pytorch_mppi"):
             baseline = by_case.get((other, *key))
-            if baseline is None or result["implementation"] in (other, "callable-reference"):
+            if baseline is None or other == result["implementation"]:
                 ratios.append("")
             else:
                 ratios.append(f"{result['env_steps_per_second'] / baseline['env_steps_per_second']:.1f}x")
