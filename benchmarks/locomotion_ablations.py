@@ -123,6 +123,11 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         question="the discriminator also sees the last 50,000 agent transitions",
         changes=dict(discriminator_replay_size=50_000),
     ),
+    "discriminator-ensemble": dict(
+        question="5 discriminators, the learned reward their mean logit less their standard deviation (the navigation "
+        "OOD lead: a reward that stops rising where the members disagree, beyond the demos' speeds)",
+        changes=dict(policy_kwargs=dict(discriminator_ensemble_size=5, discriminator_disagreement=1.0)),
+    ),
     "gradient-penalty": dict(
         question="a gradient penalty on the discriminator (weight 10, between expert and agent transitions) instead of "
         "spectral norm, as MPAIL2's critic bounds its slope",

@@ -4,11 +4,13 @@ import json
 
 import numpy as np
 import pytest
+import torch as th
 from test_baselines import tiny_configs
 
 from benchmarks import runner
 from benchmarks.report import DETERMINISTIC_NOISE, SAME_NOISE
 from benchmarks.runner import TRUE_REWARD_LABEL, main, make_jobs, mean_ci, ood_measures, steps_summary
+from sb3_mpail import MPAIL
 from sb3_mpail.demos import shipped_demo_info
 from sb3_mpail.evaluation import normalised_score
 
@@ -327,3 +329,49 @@ def test_a_plain_dynamics_function_plans_as_the_built_in_bicycle_and_is_compared
     rows = planner_speed.table([case("reference", 0.6), case("callable", 0.2), case("callable-reference", 1.0)])
     callable_row = next(line for line in rows.splitlines() if "user's plain function" in line)
     assert "| 5.0x |" in callable_row  # against the reference through the same function, not the built-in's 3.0x
+
+
+def test_the_simulator_dynamics_step_a_locomotion_observation_as_the_env_does():
+    pytest.importorskip("mujoco", reason="the MuJoCo tasks need mujoco (the scenarios extra)")
+    import gymnasium as gym
+
+    from benchmarks.locomotion_diagnosis import SimulatorDynamics
+
+    env = gym.make("Hopper-v4")
+    observation, _ = env.reset(seed=0)
+    env.action_space.seed(0)
+    states, actions, next_states = [], [], []
+    for _ in range(20):
+        action = env.action_space.sample()
+        next_observation, _, terminated, _, _ = env.step(action)
+        states.append(observation), actions.append(action), next_states.append(next_observation)
+        observation = next_observation
+        if terminated:
+            break
+    predicted = SimulatorDynamics("Hopper-v4")(th.as_tensor(np.array(states)), th.as_tensor(np.array(actions)))
+    np.testing.assert_allclose(predicted.numpy(), np.array(next_states), atol=1e-9)
+
+
+def test_a_diagnosis_plays_a_saved_model_each_way_and_reports_each_row(tmp_path):
+    from benchmarks import locomotion_ablations, locomotion_diagnosis
+
+    ablations, out_dir = tmp_path / "ablations", tmp_path / "Hopper-v4_1000steps"
+    locomotion_ablations.run_variant("Hopper-v4", "defaults", 0, 1000, 1, ablations, "c")
+    for player in locomotion_diagnosis.PLAYERS:
+        path = locomotion_diagnosis.diagnose("Hopper-v4", "defaults", 0, player, 1, ablations, out_dir, "d")
+        result = json.loads(path.read_text())
+        assert result["player"] == player and result["length"] > 0 and np.isfinite(result["score"])
+    text = locomotion_diagnosis.report(tmp_path)
+    assert "models trained for 1000 env steps" in text
+    assert sum(line.startswith("| `defaults` |") for line in text.splitlines()) == len(locomotion_diagnosis.PLAYERS)
+
+
+def test_the_simulator_player_plans_through_mujoco_and_the_actor_player_without_a_planner():
+    from benchmarks import locomotion_diagnosis
+
+    planner = dict(dynamics="learned", n_samples=4, horizon=2, n_iterations=1, policy_prior=True, n_proposals=2)
+    model = MPAIL("MlpMPPI", "Hopper-v4", demos="hopper_16", n_steps=8, seed=0, device="cpu", policy_kwargs=planner)
+    assert locomotion_diagnosis.player_of(model, "Hopper-v4", "learned-model") is model
+    assert isinstance(locomotion_diagnosis.player_of(model, "Hopper-v4", "actor"), locomotion_diagnosis.PriorActor)
+    simulated = locomotion_diagnosis.player_of(model, "Hopper-v4", "simulator")
+    assert isinstance(simulated.policy.planner.dynamics, locomotion_diagnosis.SimulatorDynamics)
