@@ -40,7 +40,7 @@ RESULTS_DIR = Path(__file__).resolve().parent / "results" / "locomotion_diagnosi
 PLAYERS: Dict[str, str] = {
     "learned-model": "the planner as trained, through its learned model",
     "simulator": "the same planner, reward and value through MuJoCo itself: perfect predictions",
-    "actor": "the policy prior's actor alone (the mean of pi(a | s)), no planning",
+    "actor": "the policy prior's actor alone (its mean action), no planning",
 }
 
 
