@@ -212,6 +212,13 @@ def run_variant(
     return path
 
 
+def grid_runs(results_dir: Path, pattern: str = "*_seed*.json") -> List[List[Dict[str, Any]]]:
+    """The stored results of each ``<task>_<steps>steps`` grid under ``results_dir`` that holds any, grid by grid."""
+    grids = [[json.loads(path.read_text()) for path in sorted(grid.glob(pattern))]
+             for grid in sorted(Path(results_dir).glob("*steps"))]  # fmt: skip
+    return [runs for runs in grids if runs]
+
+
 def report(results_dir: Path) -> str:
     """The ``locomotion-ablations`` section: per task, budget and variant, means and 95% CIs over its seeds."""
     lines = [
@@ -221,10 +228,7 @@ def report(results_dir: Path) -> str:
         "deterministic episodes from fixed seeds; score = (R - random) / (expert - random) against the shipped demos' "
         "information file, speed = forward speed / the expert's. Means ± 95% CI (Student's t) over seeds.",
     ]
-    for grid in sorted(Path(results_dir).glob("*steps")):
-        runs = [json.loads(path.read_text()) for path in sorted(grid.glob("*_seed*.json"))]
-        if not runs:
-            continue
+    for runs in grid_runs(results_dir):
         commands = commands_of(runs)
         lines += ["", f"### {runs[0]['env_id']}, {runs[0]['timesteps']} env steps", "",
                   f"{runs[0]['n_eval_episodes']} evaluation episodes per run, on {machines_of(runs)}. Commands: "

@@ -27,7 +27,7 @@ import torch as th
 from torch import nn
 
 from benchmarks import locomotion_ablations
-from benchmarks.locomotion_ablations import EVAL_SEED, results_dir_of
+from benchmarks.locomotion_ablations import EVAL_SEED, grid_runs, results_dir_of
 from benchmarks.report import commands_of, format_ci, machine_description, machines_of, mean_ci, write_section
 from benchmarks.scenarios import zoo_hyperparameters
 from sb3_mpail import MPAIL
@@ -138,10 +138,7 @@ def report(results_dir: Path) -> str:
         "through MuJoCo itself (the same planner, learned reward and value, perfect predictions), and by the policy "
         "prior's actor alone. Score = (R - random) / (expert - random); means ± 95% CI (Student's t) over seeds.",
     ]
-    for grid in sorted(Path(results_dir).glob("*steps")):
-        runs = [json.loads(path.read_text()) for path in sorted(grid.glob("*_seed*_*.json"))]
-        if not runs:
-            continue
+    for runs in grid_runs(results_dir, "*_seed*_*.json"):
         lines += ["", f"### {runs[0]['env_id']}, models trained for {runs[0]['timesteps']} env steps", "",
                   f"{runs[0]['n_episodes']} episodes per model and player, on {machines_of(runs)}. Commands: "
                   + "; ".join(f"`{command}`" for command in commands_of(runs)), "",
