@@ -10,6 +10,7 @@ from torch import nn
 
 import sb3_mpail.mppi.fused as fused
 import sb3_mpail.mppi.native as native
+from sb3_mpail.mppi.ensemble import FrozenEnsembleCost
 
 # only a machine without a C compiler skips: where there is one (CI), a kernel that fails to build fails these tests
 pytestmark = pytest.mark.skipif(native._compiler() is None, reason="no C compiler here")
@@ -48,6 +49,58 @@ def test_kernel_transition_costs_match_the_torch_path(activation, feature_major)
     kernel, torch_path = transition_costs(mlp, states, True), transition_costs(mlp, states, False)
     assert kernel.shape == (3, 67)
     assert th.allclose(kernel, torch_path, atol=1e-5, rtol=1e-5), (kernel - torch_path).abs().max()
+
+
+def ensemble_members(widths: list, n_members: int = 5) -> list:
+    th.manual_seed(0)
+    members = []
+    for _ in range(n_members):
+        layers = []
+        for n_in, n_out in zip(widths, widths[1:]):
+            layers += [nn.Linear(n_in, n_out), nn.LeakyReLU(0.2)]
+        members.append(nn.Sequential(*layers, nn.Linear(widths[-1], 1)).eval())
+    return members
+
+
+def ensemble_costs(members: list, states: th.Tensor, disagreement: float, use_kernel: bool) -> th.Tensor:
+    cost = FrozenEnsembleCost.build([fused.freeze_mlp(member) for member in members], states.shape[-1], disagreement)
+    if use_kernel:
+        assert cost.native is not None
+    else:
+        cost.native = None
+    with th.no_grad():
+        return cost(states, 1.01 ** th.arange(states.shape[0] - 1, dtype=th.float32), fused.Workspace()).clone()
+
+
+# one hidden layer; two (the last folded into the output); three (the hidden layers ping-pong past the inputs)
+@pytest.mark.parametrize("widths", [[14, 9], [14, 17, 6], [14, 32, 32, 32]])
+@pytest.mark.parametrize("feature_major", [True, False])
+def test_kernel_ensemble_costs_match_the_torch_path_and_the_ensemble_module(widths, feature_major):
+    members = ensemble_members(widths)
+    states = rolled_out_states(horizon=4, n_envs=3, n_samples=67, state_dim=7, feature_major=feature_major)
+    kernel, torch_path = ensemble_costs(members, states, 1.3, True), ensemble_costs(members, states, 1.3, False)
+    with th.no_grad():
+        logits = th.stack([member(th.cat([states[:-1], states[1:]], dim=-1))[..., 0] for member in members])
+    combined = logits.mean(dim=0) - 1.3 * logits.std(dim=0, unbiased=False)
+    module = -(1.01 ** th.arange(4.0))[:, None, None].mul(combined).sum(dim=0)
+    assert kernel.shape == (3, 67)
+    assert th.allclose(kernel, torch_path, atol=1e-5, rtol=1e-5), (kernel - torch_path).abs().max()
+    assert th.allclose(kernel, module, atol=1e-5, rtol=1e-5), (kernel - module).abs().max()
+
+
+def test_the_kernel_takes_only_ensembles_it_can_evaluate():
+    frozen = [fused.native_mlp(fused.freeze_mlp(member)) for member in ensemble_members([14, 9], n_members=3)]
+    assert native.NativeEnsemble.from_members(frozen, th.zeros(3), 1.0) is not None
+    assert native.NativeEnsemble.from_members(frozen[:1], th.zeros(1), 1.0) is None
+    other_inputs = fused.native_mlp(fused.freeze_mlp(ensemble_members([12, 9], n_members=1)[0]))
+    assert native.NativeEnsemble.from_members([*frozen[:2], other_inputs], th.zeros(3), 1.0) is None
+    too_many = native.load_library().ensemble_max_members() + 1
+    assert native.NativeEnsemble.from_members(frozen[:1] * too_many, th.zeros(too_many), 1.0) is None
+    ensemble = native.NativeEnsemble.from_members(frozen, th.zeros(3), 1.0)
+    with pytest.raises(ValueError, match="takes 14 inputs"):
+        ensemble.marked_up_sums(th.randn(3, 10, 6), th.ones(2), True, th.empty(10))
+    with pytest.raises(ValueError, match="contiguous output"):
+        ensemble.marked_up_sums(th.randn(3, 10, 7), th.ones(2), True, th.empty(9))
 
 
 def held_rolled_out_states(held_dims: list, n_envs: int = 3, n_samples: int = 67) -> tuple:
@@ -108,6 +161,15 @@ def test_kernel_costs_do_not_depend_on_the_thread_count():
     finally:
         th.set_num_threads(threads)
     assert th.equal(one_thread, two_threads)
+    members = ensemble_members([24, 32, 32])
+    try:
+        th.set_num_threads(1)
+        one_thread = ensemble_costs(members, states, 1.0, True)
+        th.set_num_threads(2)
+        two_threads = ensemble_costs(members, states, 1.0, True)
+    finally:
+        th.set_num_threads(threads)
+    assert th.equal(one_thread, two_threads)
 
 
 @pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86 instruction sets")
@@ -124,6 +186,9 @@ def test_the_kernel_built_without_avx512_gives_the_same_costs(fresh_build, monke
     with th.no_grad():
         held = cost(states, 1.01 ** th.arange(4, dtype=th.float32), fused.Workspace())
     assert th.allclose(held, torch_path, atol=1e-5, rtol=1e-5), (held - torch_path).abs().max()
+    members = ensemble_members([14, 17, 6])
+    kernel, torch_path = ensemble_costs(members, states, 1.0, True), ensemble_costs(members, states, 1.0, False)
+    assert th.allclose(kernel, torch_path, atol=1e-5, rtol=1e-5), (kernel - torch_path).abs().max()
 
 
 def test_the_kernel_refuses_tensors_it_would_read_or_write_out_of_bounds():

@@ -8,7 +8,8 @@ from typing import List, Optional, Sequence
 import torch as th
 from torch import nn
 
-from sb3_mpail.mppi.fused import FrozenMlp, Workspace, chunk_rows, freeze_mlp
+from sb3_mpail.mppi.fused import FrozenMlp, Workspace, chunk_rows, freeze_mlp, native_mlp
+from sb3_mpail.mppi.native import NativeEnsemble
 
 
 class DiscriminatorEnsemble(nn.Module):
@@ -52,9 +53,10 @@ def member_logits(discriminator: nn.Module, state: th.Tensor, next_state: th.Ten
 class FrozenEnsembleCost:
     """
     ``sum_t markups[t] * c(s_t, s_{t+1})`` for a whole rolled-out horizon, with ``c`` the negated logit of a
-    :class:`DiscriminatorEnsemble` of frozen MLPs of one architecture on ``[s, s']``: every layer is one batched
-    product over the members, the first split into its ``s`` and ``s'`` halves, instead of ``K`` module calls that
-    each concatenate ``[s, s']`` and re-normalise their weights.
+    :class:`DiscriminatorEnsemble` of frozen MLPs of one architecture on ``[s, s']``, instead of ``K`` module calls
+    that each concatenate ``[s, s']`` and re-normalise their weights: by the compiled kernel where it takes the members
+    (:class:`~sb3_mpail.mppi.native.NativeEnsemble`, every member on a block of rows while it is in the cache), else
+    in torch, every layer one batched product over the members, the first split into its ``s`` and ``s'`` halves.
 
     :param mlps: the members, frozen
     :param state_dim: size of a state (the first layers take ``2 * state_dim`` inputs)
@@ -72,6 +74,7 @@ class FrozenEnsembleCost:
         self.output_weight = th.stack([mlp.weights[-1][:, 0] for mlp in mlps])[:, None]  # (K, 1, hidden)
         self.output_bias = th.stack([mlp.biases[-1][0] for mlp in mlps])[:, None]  # (K, 1)
         self.disagreement = disagreement
+        self.native = NativeEnsemble.from_members([native_mlp(mlp) for mlp in mlps], self.output_bias[:, 0], disagreement)
 
     @staticmethod
     def build(mlps: Sequence[Optional[FrozenMlp]], state_dim: int, disagreement: float) -> Optional["FrozenEnsembleCost"]:
@@ -102,6 +105,11 @@ class FrozenEnsembleCost:
         :return: cost per sample, ``(n_envs, n_samples)``
         """
         n_states, n_envs, n_samples, state_dim = states.shape
+        if self.native is not None:
+            costs = workspace.get("step_costs", (n_envs, n_samples), states).view(-1)
+            # a view for row-major and feature-major storage alike (see feature_major_states): never a copy
+            flat_states = states.reshape(n_states, n_envs * n_samples, state_dim)
+            return self.native.marked_up_sums(flat_states, -markups, True, costs).view(n_envs, n_samples)
         rows = states[:-1].reshape(-1, state_dim), states[1:].reshape(-1, state_dim)
         logits = workspace.get("ensemble_logits", (len(rows[0]),), states)
         # chunks whose K activations stay in the CPU cache between layers (half of fused.chunk_rows(): faster than the

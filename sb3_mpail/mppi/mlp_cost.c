@@ -31,6 +31,7 @@
 #define BLOCK (LANES * VECTORS)
 #define MAX_WIDTH 256
 #define MIN_COLUMNS_PER_THREAD 256 /* below this, another thread costs more than it saves */
+#define MAX_MEMBERS 16 /* members of an ensemble the kernel takes */
 
 typedef float vector __attribute__((vector_size(LANES * sizeof(float))));
 typedef int mask __attribute__((vector_size(LANES * sizeof(int))));
@@ -166,12 +167,73 @@ static void gather_group_biases(const struct inputs *in, int width, long block, 
     }
 }
 
-/* out[c] for columns c in [begin, end) of mlp_costs; out points at column begin */
-static void column_range(const struct inputs *in, const struct mlp *mlp, const float *markups, long begin, long end,
-                         float *out) {
+/* z: the output unit's sum (its last bias left out) of mlp for one block whose first-layer inputs are in inputs;
+ * first_row_bias replaces the first layer's bias where not NULL. The hidden layers ping-pong between a and b, so the
+ * inputs stay as they are for the next member of an ensemble. */
+static void block_output(const struct inputs *in, const struct mlp *mlp, const float *inputs,
+                         const float *first_row_bias, float *a, float *b, vector *z) {
+    for (int v = 0; v < VECTORS; v++) z[v] = splat(0.f);
+    const float *input = inputs;
+    float *output = a;
+    for (int l = 0; l < mlp->n_layers; l++) {
+        int last = l + 1 == mlp->n_layers, last_hidden = l + 2 == mlp->n_layers;
+        struct layer layer = {
+            .input = input,
+            .n_in = l == 0 ? in->n_read : mlp->widths[l],
+            .read = l == 0 ? in->read : NULL,
+            .weight = mlp->weights[l],
+            .n_out = mlp->widths[l + 1],
+            .bias = last || (l == 0 && first_row_bias) ? NULL : mlp->biases[l],
+            .row_bias = l == 0 ? first_row_bias : NULL,
+            .activation = last ? ACTIVATION_NONE : mlp->activations[l],
+            .slope = mlp->slopes[l],
+            .output = output,
+            .next_weight = last_hidden ? mlp->weights[l + 1] : NULL,
+        };
+        dense(&layer, z);
+        if (last) /* a single layer: its output unit was stored, not folded */
+            for (int v = 0; v < VECTORS; v++) z[v] = load(output + v * LANES);
+        if (last_hidden) break;
+        input = output;
+        output = output == a ? b : a;
+    }
+}
+
+/* The cost model of column_range: one MLP's output (its last bias left to the caller), or, with n_members > 1, an
+ * ensemble's mean output less disagreement times the members' standard deviation (biases included). */
+struct members {
+    int n_members;
+    const struct mlp *mlps;
+    const float *output_biases; /* (n_members,), read only with n_members > 1 */
+    float disagreement;
+};
+
+/* each row's mean - disagreement * std over the members' outputs z[k] (+ their output biases), as torch computes
+ * them: the mean of the outputs, then the square root of the mean squared deviation from it */
+static void combine_members(const struct members *members, const vector *z, float *combined) {
+    int k_count = members->n_members;
+    for (int v = 0; v < VECTORS; v++) {
+        vector sum = {0};
+        for (int k = 0; k < k_count; k++) sum += z[k * VECTORS + v] + members->output_biases[k];
+        vector mean = sum / (float)k_count, squares = {0};
+        for (int k = 0; k < k_count; k++) {
+            vector deviation = z[k * VECTORS + v] + members->output_biases[k] - mean;
+            squares += deviation * deviation;
+        }
+        vector variance = squares / (float)k_count;
+        for (int i = 0; i < LANES; i++) combined[v * LANES + i] = mean[i] - members->disagreement * sqrtf(variance[i]);
+    }
+}
+
+/* out[c] for columns c in [begin, end) of mlp_costs / ensemble_costs; out points at column begin */
+static void column_range(const struct inputs *in, const struct members *members, const float *markups, long begin,
+                         long end, float *out) {
     float first[MAX_WIDTH * BLOCK] __attribute__((aligned(64)));
-    float second[MAX_WIDTH * BLOCK] __attribute__((aligned(64)));
+    float a[MAX_WIDTH * BLOCK] __attribute__((aligned(64)));
+    float b[MAX_WIDTH * BLOCK] __attribute__((aligned(64)));
     float row_bias[MAX_WIDTH * BLOCK] __attribute__((aligned(64)));
+    vector z[MAX_MEMBERS * VECTORS];
+    float combined[BLOCK] __attribute__((aligned(64)));
     long biased_group = -1; /* the group whose biases row_bias holds for every row, -1: none */
     long offsets[MAX_WIDTH];
     for (int k = 0; k < in->n_read; k++) {
@@ -187,38 +249,18 @@ static void column_range(const struct inputs *in, const struct mlp *mlp, const f
             if (in->group_biases) {
                 long group = block / in->group_columns, last_group = (block + n - 1) / in->group_columns;
                 if (group != last_group || group != biased_group) {
-                    gather_group_biases(in, mlp->widths[1], block, n, row_bias);
+                    gather_group_biases(in, members->mlps[0].widths[1], block, n, row_bias);
                     biased_group = group == last_group ? group : -1;
                 }
                 first_row_bias = row_bias;
             }
-            /* z: the output unit's sum, into which the last hidden layer's units go straight */
-            vector z[VECTORS] = {0};
-            float *input = first, *output = second;
-            for (int l = 0; l < mlp->n_layers; l++) {
-                int last = l + 1 == mlp->n_layers, last_hidden = l + 2 == mlp->n_layers;
-                struct layer layer = {
-                    .input = input,
-                    .n_in = l == 0 ? in->n_read : mlp->widths[l],
-                    .read = l == 0 ? in->read : NULL,
-                    .weight = mlp->weights[l],
-                    .n_out = mlp->widths[l + 1],
-                    .bias = last || (l == 0 && first_row_bias) ? NULL : mlp->biases[l],
-                    .row_bias = l == 0 ? first_row_bias : NULL,
-                    .activation = last ? ACTIVATION_NONE : mlp->activations[l],
-                    .slope = mlp->slopes[l],
-                    .output = output,
-                    .next_weight = last_hidden ? mlp->weights[l + 1] : NULL,
-                };
-                dense(&layer, z);
-                if (last) /* a single layer: its output unit was stored, not folded */
-                    for (int v = 0; v < VECTORS; v++) z[v] = load(output + v * LANES);
-                if (last_hidden) break;
-                float *swap = input;
-                input = output;
-                output = swap;
-            }
+            for (int k = 0; k < members->n_members; k++)
+                block_output(in, &members->mlps[k], first, first_row_bias, a, b, z + k * VECTORS);
             const float *outputs = (const float *)z;
+            if (members->n_members > 1) {
+                combine_members(members, z, combined);
+                outputs = combined;
+            }
             float *totals = out + (block - begin);
             if (t == 0)
                 for (int i = 0; i < n; i++) totals[i] = markups[0] * outputs[i];
@@ -228,16 +270,14 @@ static void column_range(const struct inputs *in, const struct mlp *mlp, const f
     }
 }
 
-/*
- * out[c] = sum_{t < steps} markups[t] * z(t, c) for columns c < in->columns, where z is the MLP's single output (its
- * last layer's bias left out) on the inputs x(t, c). The columns are split into one contiguous range of whole blocks
- * per thread, at most max_threads (torch's count).
- */
-void mlp_costs(const struct inputs *in, const struct mlp *mlp, const float *markups, float *out, int max_threads) {
+/* column_range over columns c < in->columns, split into one contiguous range of whole blocks per thread, at most
+ * max_threads (torch's count) */
+static void member_costs(const struct inputs *in, const struct members *members, const float *markups, float *out,
+                         int max_threads) {
     long threads = in->columns / MIN_COLUMNS_PER_THREAD;
     if (threads > max_threads) threads = max_threads;
     if (threads <= 1) {
-        column_range(in, mlp, markups, 0, in->columns, out);
+        column_range(in, members, markups, 0, in->columns, out);
         return;
     }
     long n_blocks = (in->columns + BLOCK - 1) / BLOCK;
@@ -246,6 +286,29 @@ void mlp_costs(const struct inputs *in, const struct mlp *mlp, const float *mark
         long count = omp_get_num_threads(), thread = omp_get_thread_num();
         long begin = n_blocks * thread / count * BLOCK, end = n_blocks * (thread + 1) / count * BLOCK;
         if (end > in->columns) end = in->columns;
-        column_range(in, mlp, markups, begin, end, out + begin);
+        column_range(in, members, markups, begin, end, out + begin);
     }
+}
+
+/*
+ * out[c] = sum_{t < steps} markups[t] * z(t, c) for columns c < in->columns, where z is the MLP's single output (its
+ * last layer's bias left out) on the inputs x(t, c).
+ */
+void mlp_costs(const struct inputs *in, const struct mlp *mlp, const float *markups, float *out, int max_threads) {
+    struct members single = {1, mlp, NULL, 0.f};
+    member_costs(in, &single, markups, out, max_threads);
+}
+
+int ensemble_max_members(void) { return MAX_MEMBERS; }
+
+/*
+ * out[c] = sum_{t < steps} markups[t] * e(t, c), where e is the mean of n_members MLPs' outputs z_k + output_biases[k]
+ * on the inputs x(t, c) less disagreement times their standard deviation (2 <= n_members <= MAX_MEMBERS, MLPs of the
+ * same input size). Held inputs are not taken: in->read and in->group_biases must be NULL (each member would need
+ * its own group biases).
+ */
+void ensemble_costs(const struct inputs *in, const struct mlp *mlps, int n_members, const float *output_biases,
+                    float disagreement, const float *markups, float *out, int max_threads) {
+    struct members ensemble = {n_members, mlps, output_biases, disagreement};
+    member_costs(in, &ensemble, markups, out, max_threads);
 }

@@ -135,6 +135,11 @@ def load_library() -> Optional[ctypes.CDLL]:
     library.mlp_costs.restype = None
     pointer = ctypes.c_void_p
     library.mlp_costs.argtypes = [ctypes.POINTER(_Inputs), ctypes.POINTER(_Mlp), pointer, pointer, ctypes.c_int]
+    library.ensemble_max_members.restype = ctypes.c_int
+    library.ensemble_costs.restype = None
+    library.ensemble_costs.argtypes = [
+        ctypes.POINTER(_Inputs), pointer, ctypes.c_int, pointer, ctypes.c_float, pointer, pointer, ctypes.c_int
+    ]  # fmt: skip
     if hasattr(library, "standard_normal_fill"):  # built for CPUs with AVX2 and FMA only
         library.standard_normal_fill.restype = None
         library.standard_normal_fill.argtypes = [pointer, pointer, ctypes.c_long, ctypes.c_int]
@@ -270,7 +275,7 @@ class NativeMlp:
         :return: what :meth:`marked_up_sums` takes as ``held``
         """
         state_dim = initial_states.shape[-1]
-        self._check_input_size(state_dim, pairs)
+        _check_input_size(self.input_size, state_dim, pairs)
         dims = sorted(set(held_dims))
         if dims and not 0 <= dims[0] <= dims[-1] < state_dim:
             raise ValueError(f"held state dimensions {dims} out of range for {state_dim}-D states")
@@ -305,36 +310,106 @@ class NativeMlp:
             columns are the envs' in turn, as many per env
         :return: ``out``
         """
-        n_states, columns, state_dim = states.shape
-        steps = n_states - 1 if pairs else n_states
-        # the kernel reads and writes raw memory: anything else than these shapes and types would go out of bounds
-        self._check_input_size(state_dim, pairs)
-        if markups.shape != (steps,) or out.shape != (columns,) or not out.is_contiguous():
-            raise ValueError(f"expected {steps} markups and a contiguous output of {columns} columns")
-        if any(tensor.dtype != th.float32 or tensor.device.type != "cpu" for tensor in (states, markups, out)):
-            raise ValueError("the CPU kernel takes CPU float32 tensors only")
         read, n_read, group_biases, group_columns = None, self.input_size, None, 0
         if held is not None:
             groups = held.group_biases.shape[0]
             if held.input_size != self.input_size or held.group_biases.shape[1:] != (self.weights[0].shape[1],):
                 raise ValueError("these held inputs were made for another MLP")
-            if groups == 0 or columns % groups != 0:
-                raise ValueError(f"{columns} columns do not split into the {groups} groups of the held inputs")
+            if groups == 0 or states.shape[1] % groups != 0:
+                raise ValueError(f"{states.shape[1]} columns do not split into the {groups} groups of the held inputs")
             read, n_read = ctypes.addressof(held.read), len(held.read)
-            group_biases, group_columns = held.group_biases.data_ptr(), columns // groups
-        markups = markups.contiguous()
-        time_stride, column_stride, feature_stride = states.stride()
-        inputs = _Inputs(
-            states.data_ptr(), feature_stride, time_stride, column_stride, state_dim, int(pairs), steps, columns,
-            n_read, read, group_biases, group_columns,
+            group_biases, group_columns = held.group_biases.data_ptr(), states.shape[1] // groups
+        inputs, markups = _kernel_inputs(
+            states, markups, pairs, out, self.input_size, n_read, read, group_biases, group_columns
         )  # fmt: skip
         threads = th.get_num_threads()
         self.library.mlp_costs(ctypes.byref(inputs), ctypes.byref(self._mlp), markups.data_ptr(), out.data_ptr(), threads)
         return out
 
-    def _check_input_size(self, state_dim: int, pairs: bool) -> None:
-        if (2 if pairs else 1) * state_dim != self.input_size:
-            raise ValueError(f"the MLP takes {self.input_size} inputs, not {'2 x ' if pairs else ''}{state_dim}")
+
+def _check_input_size(input_size: int, state_dim: int, pairs: bool) -> None:
+    if (2 if pairs else 1) * state_dim != input_size:
+        raise ValueError(f"the MLP takes {input_size} inputs, not {'2 x ' if pairs else ''}{state_dim}")
+
+
+def _kernel_inputs(
+    states: th.Tensor,
+    markups: th.Tensor,
+    pairs: bool,
+    out: th.Tensor,
+    input_size: int,
+    n_read: int,
+    read: Optional[int] = None,
+    group_biases: Optional[int] = None,
+    group_columns: int = 0,
+) -> Tuple[_Inputs, th.Tensor]:
+    """
+    The kernel's ``struct inputs`` for ``states`` and the contiguous ``markups`` it reads, after checking everything
+    the kernel would otherwise read or write out of bounds (see :meth:`NativeMlp.marked_up_sums`).
+    """
+    n_states, columns, state_dim = states.shape
+    steps = n_states - 1 if pairs else n_states
+    _check_input_size(input_size, state_dim, pairs)
+    if markups.shape != (steps,) or out.shape != (columns,) or not out.is_contiguous():
+        raise ValueError(f"expected {steps} markups and a contiguous output of {columns} columns")
+    if any(tensor.dtype != th.float32 or tensor.device.type != "cpu" for tensor in (states, markups, out)):
+        raise ValueError("the CPU kernel takes CPU float32 tensors only")
+    time_stride, column_stride, feature_stride = states.stride()
+    inputs = _Inputs(
+        states.data_ptr(), feature_stride, time_stride, column_stride, state_dim, int(pairs), steps, columns,
+        n_read, read, group_biases, group_columns,
+    )  # fmt: skip
+    return inputs, markups.contiguous()
+
+
+class NativeEnsemble:
+    """
+    An ensemble of frozen MLPs of one input size (one output each) evaluated by the compiled kernel: per input, the
+    members' mean output less ``disagreement`` times their standard deviation (as
+    :class:`~sb3_mpail.mppi.ensemble.DiscriminatorEnsemble` combines its logits). Build it with :meth:`from_members`.
+
+    :param members: the members' kernel views
+    :param output_biases: each member's output bias, ``(n_members,)``
+    :param disagreement: weight of the members' standard deviation
+    """
+
+    def __init__(self, members: Sequence[NativeMlp], output_biases: th.Tensor, disagreement: float):
+        self.members = list(members)  # kept alive: the kernel reads their weights through the structs below
+        self.library = self.members[0].library
+        self.input_size = self.members[0].input_size
+        self.output_biases = output_biases.detach().to(th.float32).contiguous()
+        self.disagreement = float(disagreement)
+        self._mlps = (_Mlp * len(self.members))(*[member._mlp for member in self.members])
+
+    @classmethod
+    def from_members(
+        cls, members: Sequence[Optional[NativeMlp]], output_biases: th.Tensor, disagreement: float
+    ) -> Optional["NativeEnsemble"]:
+        """
+        :param members: each member's :meth:`NativeMlp.from_layers` view (``None`` where the kernel cannot take it)
+        :param output_biases: each member's output bias, ``(n_members,)``
+        :param disagreement: weight of the members' standard deviation
+        :return: the kernel's view of the ensemble, or ``None`` where it cannot take one of the members, their input
+            sizes differ, or there are fewer than 2 or more members than the kernel's limit
+        """
+        if any(member is None for member in members) or len({member.input_size for member in members}) != 1:
+            return None
+        if not 2 <= len(members) <= members[0].library.ensemble_max_members():
+            return None
+        return cls(members, output_biases, disagreement)
+
+    def marked_up_sums(self, states: th.Tensor, markups: th.Tensor, pairs: bool, out: th.Tensor) -> th.Tensor:
+        """
+        ``out[c] = sum_t markups[t] e(t, c)``, with ``e`` the ensemble's combined output (biases included) on
+        ``[states[t, c], states[t + 1, c]]`` (``pairs``) or on ``states[t, c]``; arguments as
+        :meth:`NativeMlp.marked_up_sums`'s, every input read.
+        """
+        inputs, markups = _kernel_inputs(states, markups, pairs, out, self.input_size, self.input_size)
+        self.library.ensemble_costs(
+            ctypes.byref(inputs), ctypes.addressof(self._mlps), len(self.members), self.output_biases.data_ptr(),
+            self.disagreement, markups.data_ptr(), out.data_ptr(), th.get_num_threads(),
+        )  # fmt: skip
+        return out
 
 
 #: bytes of torch's CPU generator state (``CPUGeneratorImplState``), whose head ``normal_noise.c`` reads and advances
