@@ -64,7 +64,17 @@ PAPER_POLICY_KWARGS: Dict[str, Any] = dict(n_samples=512, horizon=10, n_iteratio
 PAPER_ALGORITHM_KWARGS: Dict[str, Any] = dict(n_steps=200, discriminator_update_interval=3)
 
 # command-line planner and algorithm overrides: option name -> (keyword, type, where it goes)
-POLICY_OPTIONS = {"n_samples": int, "horizon": int, "n_iterations": int, "noise_std": float, "markup": float, "sampler": str}
+POLICY_OPTIONS = {
+    "n_samples": int,
+    "horizon": int,
+    "n_iterations": int,
+    "noise_std": float,
+    "markup": float,
+    "sampler": str,
+    # 5 and 1.0 take the main command's planner from 0.23 to 0.41 of the out-of-distribution starts (BENCHMARKS.md)
+    "discriminator_ensemble_size": int,
+    "discriminator_disagreement": float,
+}
 ALGORITHM_OPTIONS = {
     "n_steps": int,
     "discriminator_update_interval": int,
