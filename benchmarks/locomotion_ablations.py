@@ -78,6 +78,11 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         "staying up always pays, so a fall forfeits the rest of the episode's reward",
         changes=dict(policy_kwargs=dict(reward_form="softplus")),
     ),
+    "capped-reward": dict(
+        question="the learned reward log 2D (reward_form='capped'): the logit where a transition looks like the "
+        "agent's, flat at log 2 where it looks like the expert's, so running past the expert's speed earns nothing more",
+        changes=dict(policy_kwargs=dict(reward_form="capped")),
+    ),
     "no-alive-bonus": dict(
         question="no bonus per step alive (reward_offset=0): the learned reward is the logit d alone",
         changes=dict(policy_kwargs=dict(reward_offset=0.0)),

@@ -150,8 +150,10 @@ class MPPIPolicy(BasePolicy):
         in the demos are only centred)
     :param reward_form: the learned reward as a function of the discriminator's logit ``d``
         (:data:`~sb3_mpail.mppi.costs.REWARD_FORMS`), for the planner's step costs, the value's returns and the prior's
-        Q targets alike: ``"logit"``, ``d`` itself (AIRL's form, the paper's), or ``"softplus"``, ``-log(1 - D)``
-        (GAIL's form), positive everywhere, so that on tasks whose episodes end at a fall staying up always pays
+        Q targets alike: ``"logit"``, ``d`` itself (AIRL's form, the paper's); ``"softplus"``, ``-log(1 - D)``
+        (GAIL's form), positive everywhere, so that on tasks whose episodes end at a fall staying up always pays; or
+        ``"capped"``, ``log 2D``, the logit's slope where transitions look like the agent's and flat at ``log 2``
+        where they look like the expert's, so nothing pays for out-doing the demos
     :param reward_offset: a constant added to the learned reward wherever it is used: a bonus per step alive where
         falls end episodes, keeping the logit's ranking of transitions (the planner's choices within its horizon do
         not change; the value's and the prior's, which see episodes end, do)

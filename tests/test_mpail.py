@@ -1,6 +1,7 @@
 """MPAIL honours Stable-Baselines3's algorithm contract and refuses bad input with a clear error."""
 
 import json
+import math
 
 import gymnasium as gym
 import numpy as np
@@ -13,6 +14,7 @@ from stable_baselines3.common.evaluation import evaluate_policy
 
 from sb3_mpail import MPAIL
 from sb3_mpail.mppi import ConcaveValue, DiscriminatorEnsemble, make_value_network
+from sb3_mpail.mppi.costs import REWARD_FORMS
 
 TINY_PLANNER = dict(n_samples=16, horizon=3, n_iterations=2)
 
@@ -425,6 +427,13 @@ def test_the_softplus_reward_form_pays_softplus_of_the_logit_in_planning_the_val
     logits, rewards = rewards_of_a_reward_setting(demos, tmp_path, reward_form="softplus")
     assert (rewards > 0).all()
     assert th.allclose(rewards, th.nn.functional.softplus(logits))
+
+
+def test_the_capped_reward_form_follows_the_logit_below_and_levels_off_at_log_2_above(demos, tmp_path):
+    logits, rewards = rewards_of_a_reward_setting(demos, tmp_path, reward_form="capped")
+    assert th.allclose(rewards, th.log(2 * th.sigmoid(logits)), atol=1e-6)
+    capped = REWARD_FORMS["capped"](th.tensor([-30.0, 0.0, 30.0]))
+    assert th.allclose(capped, th.tensor([-30.0 + math.log(2.0), 0.0, math.log(2.0)]))
 
 
 def test_a_reward_offset_adds_to_the_learned_reward_in_planning_the_value_and_the_prior(demos, tmp_path):
