@@ -140,6 +140,15 @@ VARIANTS: Dict[str, Variant] = {
         "the concave value on the heading as cosine and sine",
         lambda: dict(concave_value=True, value_features=dict(angles=[5])),
     ),
+    "capped-reward": Variant(
+        "the learned reward log 2D (reward_form='capped'): flat at log 2 where transitions look like the expert's, so "
+        "the discriminator's upward extrapolation (hard left turns, the diagonal behind the start) earns nothing more",
+        lambda: dict(reward_form="capped"),
+    ),
+    "capped-reward-ensemble": Variant(
+        "both: the capped reward on the 5-discriminator ensemble with its disagreement term",
+        lambda: dict(reward_form="capped", discriminator_ensemble_size=5, discriminator_disagreement=1.0),
+    ),
     "discriminator-ensemble": Variant(
         "5 discriminators, the cost their mean logit less their standard deviation (disagreement as an OOD penalty)",
         lambda: dict(discriminator_ensemble_size=5, discriminator_disagreement=1.0),
