@@ -26,7 +26,6 @@ from sb3_mpail.checks import (
 )
 from sb3_mpail.mppi.constraints import make_constraint_cost
 from sb3_mpail.mppi.costs import (
-    REWARD_FORMS,
     FeatureChain,
     FeatureMap,
     FeatureSpec,
@@ -41,6 +40,7 @@ from sb3_mpail.mppi.costs import (
 from sb3_mpail.mppi.dynamics import DynamicsSpec, LearnedDynamics, make_dynamics
 from sb3_mpail.mppi.ensemble import DiscriminatorEnsemble
 from sb3_mpail.mppi.planner import MPPIPlanner, weighted_action_std
+from sb3_mpail.mppi.reward_forms import REWARD_FORMS
 from sb3_mpail.mppi.sampling import make_sampler
 from sb3_mpail.prior import PolicyPrior, PriorValue
 
@@ -149,8 +149,8 @@ class MPPIPolicy(BasePolicy):
     :param min_input_scale: the floor of each standardised input's scale (``1``: inputs that vary less than one unit
         in the demos are only centred)
     :param reward_form: the learned reward as a function of the discriminator's logit ``d``
-        (:data:`~sb3_mpail.mppi.costs.REWARD_FORMS`), for the planner's step costs, the value's returns and the prior's
-        Q targets alike: ``"logit"``, ``d`` itself (AIRL's form, the paper's); ``"softplus"``, ``-log(1 - D)``
+        (:data:`~sb3_mpail.mppi.reward_forms.REWARD_FORMS`), for the planner's step costs, the value's returns and the
+        prior's Q targets alike: ``"logit"``, ``d`` itself (AIRL's form, the paper's); ``"softplus"``, ``-log(1 - D)``
         (GAIL's form), positive everywhere, so that on tasks whose episodes end at a fall staying up always pays; or
         ``"capped"``, ``log 2D``, the logit's slope where transitions look like the agent's and flat at ``log 2``
         where they look like the expert's, so nothing pays for out-doing the demos

@@ -14,7 +14,8 @@ from stable_baselines3.common.evaluation import evaluate_policy
 
 from sb3_mpail import MPAIL
 from sb3_mpail.mppi import ConcaveValue, DiscriminatorEnsemble, make_value_network
-from sb3_mpail.mppi.costs import REWARD_FORMS
+from sb3_mpail.mppi.fused import Workspace
+from sb3_mpail.mppi.reward_forms import REWARD_FORMS
 
 TINY_PLANNER = dict(n_samples=16, horizon=3, n_iterations=2)
 
@@ -402,8 +403,9 @@ def test_a_discriminator_ensemble_costs_its_mean_logit_less_its_spread_and_train
 def rewards_of_a_reward_setting(demos, tmp_path, **setting) -> tuple:
     """
     Trains a tiny model with the prior under a reward ``setting`` (a policy kwarg), checks what every setting must
-    hold (the planner's costs are the learned reward's negation, on the module path; the setting survives save/load)
-    and returns the discriminator's logits and the learned rewards of the same random transitions.
+    hold (the planner's costs are the learned reward's negation, on the module path and summed over a horizon on the
+    fast path; the setting survives save/load) and returns the discriminator's logits and the learned rewards of the
+    same random transitions.
     """
     planner = dict(TINY_PLANNER, **setting, policy_prior=True, n_proposals=2, prior_kwargs=dict(net_arch=(8,)))
     model = make_model(demos, discriminator_update_interval=1, prior_batch_size=8, policy_kwargs=planner).learn(16)
@@ -413,9 +415,11 @@ def rewards_of_a_reward_setting(demos, tmp_path, **setting) -> tuple:
         logits = model.policy.discriminator(states.view(10, 3), None, next_states.view(10, 3), None)
         rewards = model._learned_reward(states.view(10, 3), next_states.view(10, 3))
         step_costs = model.policy.planner.step_cost(states, next_states)
-        # the fused views sum bare logits over the horizon, so these settings plan on the module path
-        assert model.policy.planner.step_cost.planning_view(3) is None
+        horizon_states, markups = th.randn(4, 2, 5, 3), 1.1 ** th.arange(3.0)
+        summed = (markups[:, None, None] * model.policy.planner.step_cost(horizon_states[:-1], horizon_states[1:])).sum(0)
+        fast_path = model.policy.planner.step_cost.planning_view(3)(horizon_states, markups, Workspace())
     assert th.allclose(step_costs, -rewards.view(2, 5))
+    assert th.allclose(fast_path, summed, atol=1e-5)
     model.save(tmp_path / "model")
     loaded = MPAIL.load(tmp_path / "model").policy
     for name, value in setting.items():

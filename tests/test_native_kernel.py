@@ -3,6 +3,7 @@
 import platform
 import warnings
 from pathlib import Path
+from typing import Callable
 
 import pytest
 import torch as th
@@ -11,6 +12,7 @@ from torch import nn
 import sb3_mpail.mppi.fused as fused
 import sb3_mpail.mppi.native as native
 from sb3_mpail.mppi.ensemble import FrozenEnsembleCost
+from sb3_mpail.mppi.reward_forms import REWARD_FORMS
 
 # only a machine without a C compiler skips: where there is one (CI), a kernel that fails to build fails these tests
 pytestmark = pytest.mark.skipif(native._compiler() is None, reason="no C compiler here")
@@ -21,8 +23,8 @@ def frozen_network(layers: list) -> fused.FrozenMlp:
     return fused.freeze_mlp(nn.Sequential(*layers).eval())
 
 
-def transition_costs(mlp: fused.FrozenMlp, states: th.Tensor, use_kernel: bool) -> th.Tensor:
-    cost = fused.FusedTransitionCost(mlp, states.shape[-1])
+def transition_costs(mlp: fused.FrozenMlp, states: th.Tensor, use_kernel: bool, *reward) -> th.Tensor:
+    cost = fused.FusedTransitionCost(mlp, states.shape[-1], *reward)
     if use_kernel:
         assert cost.native is not None
     else:
@@ -62,8 +64,9 @@ def ensemble_members(widths: list, n_members: int = 5) -> list:
     return members
 
 
-def ensemble_costs(members: list, states: th.Tensor, disagreement: float, use_kernel: bool) -> th.Tensor:
-    cost = FrozenEnsembleCost.build([fused.freeze_mlp(member) for member in members], states.shape[-1], disagreement)
+def ensemble_costs(members: list, states: th.Tensor, disagreement: float, use_kernel: bool, *reward) -> th.Tensor:
+    frozen = [fused.freeze_mlp(member) for member in members]
+    cost = FrozenEnsembleCost.build(frozen, states.shape[-1], disagreement, *reward)
     if use_kernel:
         assert cost.native is not None
     else:
@@ -128,6 +131,69 @@ def test_kernel_costs_with_held_state_dims_match_the_torch_path(held_dims, hidde
         kernel = cost(states, markups, fused.Workspace()).clone()
     torch_path = transition_costs(mlp, states, False)
     assert th.allclose(kernel, torch_path, atol=1e-5, rtol=1e-5), (kernel - torch_path).abs().max()
+
+
+def marked_up_rewards(logits: th.Tensor, reward_form: str, reward_offset: float) -> th.Tensor:
+    """The costs the planner's module path gives ``(horizon, n_envs, n_samples)`` logits: ``-sum_t m_t (r(d) + offset)``."""
+    rewards = REWARD_FORMS[reward_form](logits) + reward_offset
+    return -(1.01 ** th.arange(float(len(logits))))[:, None, None].mul(rewards).sum(dim=0)
+
+
+def spread_logits(output_layers: list, logits: Callable[[], th.Tensor]) -> th.Tensor:
+    """
+    Scales the output layers' weights and shifts their biases so that ``logits()`` spread from -60 to 60 about their
+    median: both sides of softplus's threshold of 20, where torch switches to the identity. Returns them.
+    """
+    with th.no_grad():
+        initial = logits()
+        for layer in output_layers:
+            layer.weight.mul_(120.0 / (initial.max() - initial.min()))
+        median = logits().median()
+        for layer in output_layers:  # a nonlinear form needs the output bias inside it, not added to the sum
+            layer.bias.sub_(median)
+        spread = logits()
+    assert spread.min() < -20 and spread.max() > 20
+    return spread
+
+
+# logits from -60 to 60: both sides of softplus's threshold of 20, where torch switches to the identity
+@pytest.mark.parametrize("reward_form", ["softplus", "capped"])
+@pytest.mark.parametrize("hidden_layers", [0, 2])
+def test_kernel_costs_in_each_reward_form_match_the_torch_path_and_the_module(reward_form, hidden_layers):
+    widths = [14, 17, 6][: hidden_layers + 1]
+    layers = []
+    for n_in, n_out in zip(widths, widths[1:]):
+        layers += [nn.Linear(n_in, n_out), nn.LeakyReLU(0.2)]
+    network = nn.Sequential(*layers, nn.Linear(widths[-1], 1)).eval()
+    states, initial_states = held_rolled_out_states([1, 4, 5])
+    logits = spread_logits([network[-1]], lambda: network(th.cat([states[:-1], states[1:]], dim=-1))[..., 0])
+    module = marked_up_rewards(logits, reward_form, 0.7)
+    mlp = fused.freeze_mlp(network)
+    kernel = transition_costs(mlp, states, True, reward_form, 0.7)
+    torch_path = transition_costs(mlp, states, False, reward_form, 0.7)
+    held = fused.FusedTransitionCost(mlp, 7, reward_form, 0.7)
+    held.hold([1, 4, 5], initial_states)
+    with th.no_grad():
+        held_kernel = held(states, 1.01 ** th.arange(4, dtype=th.float32), fused.Workspace())
+    for costs in (kernel, torch_path, held_kernel):
+        assert th.allclose(costs, module, atol=1e-4, rtol=1e-5), (costs - module).abs().max()
+
+
+@pytest.mark.parametrize("reward_form", ["logit", "softplus", "capped"])
+def test_kernel_ensemble_costs_in_each_reward_form_match_the_torch_path_and_the_module(reward_form):
+    members = ensemble_members([14, 17, 6])
+    states = rolled_out_states(horizon=4, n_envs=3, n_samples=67, state_dim=7, feature_major=True)
+
+    def combined_logits() -> th.Tensor:
+        logits = th.stack([member(th.cat([states[:-1], states[1:]], dim=-1))[..., 0] for member in members])
+        return logits.mean(dim=0) - 0.5 * logits.std(dim=0, unbiased=False)
+
+    combined = spread_logits([member[-1] for member in members], combined_logits)
+    module = marked_up_rewards(combined, reward_form, -0.3)
+    kernel = ensemble_costs(members, states, 0.5, True, reward_form, -0.3)
+    torch_path = ensemble_costs(members, states, 0.5, False, reward_form, -0.3)
+    for costs in (kernel, torch_path):
+        assert th.allclose(costs, module, atol=1e-4, rtol=1e-5), (costs - module).abs().max()
 
 
 def test_kernel_values_with_held_state_dims_match_the_module():

@@ -20,6 +20,7 @@ from torch.nn.utils.parametrizations import spectral_norm
 
 from sb3_mpail.mppi.ensemble import DiscriminatorEnsemble, FrozenEnsembleCost, frozen_members
 from sb3_mpail.mppi.fused import FrozenMlp, FusedTransitionCost, FusedValue, ViewCache, freeze_mlp, fused_mlp_ok
+from sb3_mpail.mppi.reward_forms import REWARD_FORMS
 
 #: what a network sees of a state: a module, a function, state indices, or ``{"angles": [indices]}``
 FeatureSpec = Union[nn.Module, Callable[[th.Tensor], th.Tensor], Sequence[int], Mapping[str, Sequence[int]]]
@@ -759,20 +760,6 @@ class MappedView:
         return self.view(self._mapped(states), *arguments)
 
 
-#: the learned reward as a function of the discriminator's logit ``d = log D - log(1 - D)``: ``"logit"`` is ``d`` itself
-#: (AIRL's form, the paper's), negative wherever a transition looks more like the agent's than the expert's;
-#: ``"softplus"`` is ``-log(1 - D) = softplus(d)`` (GAIL's form), positive everywhere, so staying alive always pays:
-#: where falls end episodes, a mostly negative reward pays the agent to end them; ``"capped"`` is
-#: ``log 2D = log 2 - softplus(-d)``: about ``d + log 2`` where a transition looks like the agent's, flat at ``log 2``
-#: where it looks like the expert's, so that looking more expert-like than the expert's own transitions (a planner
-#: pushing past the demos' speeds, where the logit extrapolates upwards) earns nothing more
-REWARD_FORMS = {
-    "logit": lambda logits: logits,
-    "softplus": nn.functional.softplus,
-    "capped": lambda logits: math.log(2.0) - nn.functional.softplus(-logits),
-}
-
-
 def learned_reward(
     discriminator: nn.Module,
     features: Optional[nn.Module],
@@ -830,28 +817,29 @@ class TransitionCost(nn.Module):
 
     def planning_view(self, state_dim: int) -> Optional[Union[FusedTransitionCost, FrozenEnsembleCost, MappedView]]:
         """
-        The fused whole-horizon cost with the discriminator's weights frozen (until they change), behind the feature
-        map if there is one (:class:`~sb3_mpail.mppi.ensemble.FrozenEnsembleCost` for an ensemble), or ``None`` where
-        the module path must be used: gradients enabled, training mode (spectral norm's power iteration then updates
-        its vectors on every call), a reward form other than the logit or a reward offset (the fused views sum logits
-        over the horizon), or a discriminator other than MLPs on ``(s, s')``.
+        The fused whole-horizon cost with the discriminator's weights frozen (until they change), in this cost's reward
+        form and offset, behind the feature map if there is one (:class:`~sb3_mpail.mppi.ensemble.FrozenEnsembleCost`
+        for an ensemble), or ``None`` where the module path must be used: gradients enabled, training mode (spectral
+        norm's power iteration then updates its vectors on every call), or a discriminator other than MLPs on
+        ``(s, s')``.
 
         :param state_dim: size of a state
         """
         net = self.discriminator
-        if th.is_grad_enabled() or net.training or self.reward_form != "logit" or self.reward_offset != 0:
+        if th.is_grad_enabled() or net.training:
             return None
+        reward = (self.reward_form, self.reward_offset)
 
         def inputs(mlp: Optional[FrozenMlp]) -> int:  # what each state gives the first layer: the mapped features
             return state_dim if self.features is None or mlp is None else mlp.weights[0].shape[0] // 2
 
         def build_ensemble() -> Optional[FrozenEnsembleCost]:
             members = frozen_members(net)
-            return FrozenEnsembleCost.build(members, inputs(members[0]), net.disagreement)
+            return FrozenEnsembleCost.build(members, inputs(members[0]), net.disagreement, *reward)
 
         def build() -> Optional[FusedTransitionCost]:
             mlp = freeze_mlp(net.mlp)
-            return FusedTransitionCost(mlp, inputs(mlp)) if fused_mlp_ok(mlp, 2 * inputs(mlp)) else None
+            return FusedTransitionCost(mlp, inputs(mlp), *reward) if fused_mlp_ok(mlp, 2 * inputs(mlp)) else None
 
         if isinstance(net, DiscriminatorEnsemble):
             view = self._planning_views.get(net, state_dim, build_ensemble)

@@ -10,6 +10,7 @@ from torch import nn
 
 from sb3_mpail.mppi.fused import FrozenMlp, Workspace, chunk_rows, freeze_mlp, native_mlp
 from sb3_mpail.mppi.native import NativeEnsemble
+from sb3_mpail.mppi.reward_forms import REWARD_FORMS
 
 
 class DiscriminatorEnsemble(nn.Module):
@@ -52,18 +53,29 @@ def member_logits(discriminator: nn.Module, state: th.Tensor, next_state: th.Ten
 
 class FrozenEnsembleCost:
     """
-    ``sum_t markups[t] * c(s_t, s_{t+1})`` for a whole rolled-out horizon, with ``c`` the negated logit of a
-    :class:`DiscriminatorEnsemble` of frozen MLPs of one architecture on ``[s, s']``, instead of ``K`` module calls
-    that each concatenate ``[s, s']`` and re-normalise their weights: by the compiled kernel where it takes the members
-    (:class:`~sb3_mpail.mppi.native.NativeEnsemble`, every member on a block of rows while it is in the cache), else
-    in torch, every layer one batched product over the members, the first split into its ``s`` and ``s'`` halves.
+    ``sum_t markups[t] * c(s_t, s_{t+1})`` for a whole rolled-out horizon, with ``c`` the negated reward (a form of the
+    logit plus an offset) of a :class:`DiscriminatorEnsemble` of frozen MLPs of one architecture on ``[s, s']``,
+    instead of ``K`` module calls that each concatenate ``[s, s']`` and re-normalise their weights: by the compiled
+    kernel where it takes the members (:class:`~sb3_mpail.mppi.native.NativeEnsemble`, every member on a block of rows
+    while it is in the cache), else in torch, every layer one batched product over the members, the first split into
+    its ``s`` and ``s'`` halves.
 
     :param mlps: the members, frozen
     :param state_dim: size of a state (the first layers take ``2 * state_dim`` inputs)
     :param disagreement: the ensemble's weight on the members' standard deviation
+    :param reward_form: the reward as a function of the logit, a key of
+        :data:`~sb3_mpail.mppi.reward_forms.REWARD_FORMS`
+    :param reward_offset: a constant added to every transition's reward
     """
 
-    def __init__(self, mlps: Sequence[FrozenMlp], state_dim: int, disagreement: float):
+    def __init__(
+        self,
+        mlps: Sequence[FrozenMlp],
+        state_dim: int,
+        disagreement: float,
+        reward_form: str = "logit",
+        reward_offset: float = 0.0,
+    ):
         first = th.stack([mlp.weights[0] for mlp in mlps])  # (K, 2 * state_dim, hidden)
         self.state_weight, self.next_state_weight = first[:, :state_dim].contiguous(), first[:, state_dim:].contiguous()
         self.first_bias = th.stack([mlp.biases[0] for mlp in mlps])[:, None]  # (K, 1, hidden)
@@ -74,13 +86,20 @@ class FrozenEnsembleCost:
         self.output_weight = th.stack([mlp.weights[-1][:, 0] for mlp in mlps])[:, None]  # (K, 1, hidden)
         self.output_bias = th.stack([mlp.biases[-1][0] for mlp in mlps])[:, None]  # (K, 1)
         self.disagreement = disagreement
+        self.reward_form, self.reward_offset = reward_form, reward_offset
         self.native = NativeEnsemble.from_members([native_mlp(mlp) for mlp in mlps], self.output_bias[:, 0], disagreement)
 
     @staticmethod
-    def build(mlps: Sequence[Optional[FrozenMlp]], state_dim: int, disagreement: float) -> Optional["FrozenEnsembleCost"]:
+    def build(
+        mlps: Sequence[Optional[FrozenMlp]],
+        state_dim: int,
+        disagreement: float,
+        reward_form: str = "logit",
+        reward_offset: float = 0.0,
+    ) -> Optional["FrozenEnsembleCost"]:
         """
-        The view, or ``None`` where the members are not MLPs of one architecture (at least one hidden layer) on
-        ``2 * state_dim`` inputs with one output and the same activations.
+        The view (arguments as the constructor's), or ``None`` where the members are not MLPs of one architecture (at
+        least one hidden layer) on ``2 * state_dim`` inputs with one output and the same activations.
         """
         frozen = [mlp for mlp in mlps if mlp is not None]
         if len(frozen) < len(mlps):
@@ -92,7 +111,7 @@ class FrozenEnsembleCost:
         layers = next(iter(shapes))
         if len(layers) < 2 or layers[0][0] != 2 * state_dim or layers[-1][1] != 1 or frozen[0].activations[-1] is not None:
             return None
-        return FrozenEnsembleCost(frozen, state_dim, disagreement)
+        return FrozenEnsembleCost(frozen, state_dim, disagreement, reward_form, reward_offset)
 
     def hold(self, held_dims: Sequence[int], initial_states: th.Tensor) -> None:
         """Held state dimensions are not exploited here (every input is multiplied)."""
@@ -105,11 +124,13 @@ class FrozenEnsembleCost:
         :return: cost per sample, ``(n_envs, n_samples)``
         """
         n_states, n_envs, n_samples, state_dim = states.shape
+        offset_costs = markups.sum() * -self.reward_offset
         if self.native is not None:
             costs = workspace.get("step_costs", (n_envs, n_samples), states).view(-1)
             # a view for row-major and feature-major storage alike (see feature_major_states): never a copy
             flat_states = states.reshape(n_states, n_envs * n_samples, state_dim)
-            return self.native.marked_up_sums(flat_states, -markups, True, costs).view(n_envs, n_samples)
+            costs = self.native.marked_up_sums(flat_states, -markups, True, costs, self.reward_form)
+            return costs.add_(offset_costs).view(n_envs, n_samples)
         rows = states[:-1].reshape(-1, state_dim), states[1:].reshape(-1, state_dim)
         logits = workspace.get("ensemble_logits", (len(rows[0]),), states)
         # chunks whose K activations stay in the CPU cache between layers (half of fused.chunk_rows(): faster than the
@@ -117,7 +138,8 @@ class FrozenEnsembleCost:
         chunk = max(1, chunk_rows() // 2)
         for start in range(0, len(logits), chunk):
             logits[start : start + chunk] = self.logits(rows[0][start : start + chunk], rows[1][start : start + chunk])
-        return th.einsum("t,ten->en", -markups, logits.view(n_states - 1, n_envs, n_samples))
+        rewards = REWARD_FORMS[self.reward_form](logits.view(n_states - 1, n_envs, n_samples))
+        return th.einsum("t,ten->en", -markups, rewards).add_(offset_costs)
 
     def logits(self, states: th.Tensor, next_states: th.Tensor) -> th.Tensor:
         """The ensemble's logits on ``(rows, state_dim)`` transitions: the members' mean less their weighted spread."""

@@ -33,6 +33,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from sb3_mpail.mppi.native import HeldInputs, NativeMlp
+from sb3_mpail.mppi.reward_forms import REWARD_FORMS
 
 #: rows per chunk of the hidden activations and thread: 8192 x 32 floats (1 MiB) stay in a core's cache between layers
 CHUNK_ROWS_PER_THREAD = 8192
@@ -246,21 +247,26 @@ def _hidden_layers(mlp: FrozenMlp, hidden: th.Tensor, first_layer: int, last_lay
 
 class FusedTransitionCost:
     """
-    ``sum_t markups[t] * c(s_t, s_{t+1})`` with ``c = -d_theta`` for a whole rolled-out horizon, for a frozen
-    discriminator MLP on the concatenation ``[s, s']``.
+    ``sum_t markups[t] * c(s_t, s_{t+1})`` with ``c = -r(d_theta) - offset`` for a whole rolled-out horizon, for a
+    frozen discriminator MLP on the concatenation ``[s, s']``.
 
     :param mlp: the frozen discriminator; its first layer takes ``2 * state_dim`` inputs, its last gives one output
         with no activation after it
     :param state_dim: size of a state
+    :param reward_form: ``r``, a key of :data:`~sb3_mpail.mppi.reward_forms.REWARD_FORMS`
+    :param reward_offset: a constant added to every transition's reward
     """
 
-    def __init__(self, mlp: FrozenMlp, state_dim: int):
+    def __init__(self, mlp: FrozenMlp, state_dim: int, reward_form: str = "logit", reward_offset: float = 0.0):
         first_weight = mlp.weights[0]  # (2 * state_dim, hidden)
         self.mlp = mlp
         # W [s, s'] = W_s s + W_s' s': two matmuls accumulating into one output, no concatenated input
         self.state_weight = first_weight[:state_dim]
         self.next_state_weight = first_weight[state_dim:]
         self.output_weight = mlp.weights[-1][:, 0]
+        self.reward_form, self.reward_offset = reward_form, reward_offset
+        # the logit form sums the outputs before their bias and adds the bias once; the others need it per transition
+        self._reward = None if reward_form == "logit" else REWARD_FORMS[reward_form]
         self.native = native_mlp(mlp)
         self._held: Optional[HeldInputs] = None
         self._markups: Optional[th.Tensor] = None
@@ -289,12 +295,14 @@ class FusedTransitionCost:
         flat_states = states.reshape(n_states, columns, state_dim)
         costs = workspace.get("step_costs", (n_envs, n_samples), states).view(columns)
         if markups is not self._markups:  # the same markups come back every iteration of a planning step
-            # -sum_t m_t (z_t + b) = z^T (-m) - b sum_t m_t, with z the output layer's product before its bias
+            # -sum_t m_t (z_t + b + offset) = z^T (-m) - (b + offset) sum_t m_t, with z the output layer's product
+            # before its bias; the other forms: -sum_t m_t r(z_t + b) - offset sum_t m_t
             self._markups = markups
             self._negative_markups = -markups
-            self._constant = self.mlp.biases[-1] * self._negative_markups.sum()
+            summed = self.reward_offset + (self.mlp.biases[-1] if self._reward is None else 0.0)
+            self._constant = summed * self._negative_markups.sum()
         if self.native is not None:
-            self.native.marked_up_sums(flat_states, self._negative_markups, True, costs, self._held)
+            self.native.marked_up_sums(flat_states, self._negative_markups, True, costs, self._held, self.reward_form)
             return costs.add_(self._constant).view(n_envs, n_samples)
         costs.copy_(self._constant.expand(columns))
         # Chunks of at most chunk_rows() transitions: several whole time steps when one step has few columns, else
@@ -313,14 +321,17 @@ class FusedTransitionCost:
         return costs.view(n_envs, n_samples)
 
     def _add_chunk_costs(self, states: th.Tensor, negative_markups: th.Tensor, out: th.Tensor, workspace: Workspace) -> None:
-        """Adds ``sum_t -m_t z_t`` of the chunk's transitions ``(states[t], states[t + 1])`` to ``out``."""
+        """
+        Adds ``sum_t -m_t z_t`` of the chunk's transitions ``(states[t], states[t + 1])`` to ``out`` (``r(z_t + b)``
+        for a reward form other than the logit).
+        """
         n_states, columns, state_dim = states.shape
         steps, mlp = n_states - 1, self.mlp
         rows = steps * columns
         hidden = workspace.get("first_layer", (rows, self.state_weight.shape[1]), states)
         first_states, next_states = states[:-1].reshape(rows, state_dim), states[1:].reshape(rows, state_dim)
         n_layers = len(mlp.weights)
-        if n_layers == 1:  # a linear discriminator: its only bias is the output bias, already in the constant
+        if n_layers == 1:  # a linear discriminator: its only bias is the output bias, added as any MLP's is
             th.mm(first_states, self.state_weight, out=hidden)
         else:
             th.addmm(mlp.biases[0], first_states, self.state_weight, out=hidden)
@@ -332,6 +343,8 @@ class FusedTransitionCost:
                 mlp.activations[0].apply_(hidden)
             hidden = _hidden_layers(mlp, hidden, 1, n_layers - 1, workspace)
             logits = th.mv(hidden, self.output_weight, out=workspace.get("logits", (rows,), states))
+        if self._reward is not None:
+            logits = self._reward(logits.add_(mlp.biases[-1]))
         out.addmv_(logits.view(steps, columns).t(), negative_markups)
 
 

@@ -37,6 +37,10 @@ typedef float vector __attribute__((vector_size(LANES * sizeof(float))));
 typedef int mask __attribute__((vector_size(LANES * sizeof(int))));
 
 enum { ACTIVATION_NONE = 0, ACTIVATION_RELU = 1, ACTIVATION_LEAKY_RELU = 2, ACTIVATION_TANH = 3 };
+/* what each output becomes before it is marked up: itself (LINEAR; a single MLP's last bias is then left to the
+ * caller, who adds it to the sum), softplus(y) (SOFTPLUS) or log 2 - softplus(-y) (CAPPED), y the output with its
+ * bias: the learned reward forms of sb3_mpail/mppi/reward_forms.py */
+enum { FORM_LINEAR = 0, FORM_SOFTPLUS = 1, FORM_CAPPED = 2 };
 
 /* The MLP: layer l maps widths[l] inputs to widths[l + 1] outputs (widths[n_layers] == 1, every width <= MAX_WIDTH)
  * with weights[l], row-major (widths[l], widths[l + 1]), then activations[l] (slopes[l]: a leaky ReLU's). The last
@@ -199,14 +203,28 @@ static void block_output(const struct inputs *in, const struct mlp *mlp, const f
     }
 }
 
-/* The cost model of column_range: one MLP's output (its last bias left to the caller), or, with n_members > 1, an
- * ensemble's mean output less disagreement times the members' standard deviation (biases included). */
+/* The cost model of column_range: one MLP's output (with FORM_LINEAR its last bias left to the caller), or, with
+ * n_members > 1, an ensemble's mean output less disagreement times the members' standard deviation (biases included),
+ * then the form. */
 struct members {
     int n_members;
     const struct mlp *mlps;
-    const float *output_biases; /* (n_members,), read only with n_members > 1 */
+    const float *output_biases; /* (n_members,), read with n_members > 1 or a form other than FORM_LINEAR */
     float disagreement;
+    int form;
 };
+
+/* torch's softplus (beta 1, threshold 20): the input itself above the threshold, where log1p(exp(x)) rounds to it */
+static inline float softplus(float x) { return x > 20.f ? x : log1pf(expf(x)); }
+
+/* outputs[i] = the form of outputs[i] + bias, for the rows of a block */
+static void apply_form(int form, float bias, float *outputs) {
+    const float log_2 = 0.693147180559945309f;
+    for (int i = 0; i < BLOCK; i++) {
+        float y = outputs[i] + bias;
+        outputs[i] = form == FORM_SOFTPLUS ? softplus(y) : log_2 - softplus(-y);
+    }
+}
 
 /* each row's mean - disagreement * std over the members' outputs z[k] (+ their output biases), as torch computes
  * them: the mean of the outputs, then the square root of the mean squared deviation from it */
@@ -261,6 +279,12 @@ static void column_range(const struct inputs *in, const struct members *members,
                 combine_members(members, z, combined);
                 outputs = combined;
             }
+            if (members->form != FORM_LINEAR) {
+                if (outputs != combined)
+                    for (int v = 0; v < VECTORS; v++) store(combined + v * LANES, z[v]);
+                apply_form(members->form, members->n_members > 1 ? 0.f : members->output_biases[0], combined);
+                outputs = combined;
+            }
             float *totals = out + (block - begin);
             if (t == 0)
                 for (int i = 0; i < n; i++) totals[i] = markups[0] * outputs[i];
@@ -291,24 +315,26 @@ static void member_costs(const struct inputs *in, const struct members *members,
 }
 
 /*
- * out[c] = sum_{t < steps} markups[t] * z(t, c) for columns c < in->columns, where z is the MLP's single output (its
- * last layer's bias left out) on the inputs x(t, c).
+ * out[c] = sum_{t < steps} markups[t] * z(t, c) for columns c < in->columns, where z is the MLP's single output on the
+ * inputs x(t, c): with FORM_LINEAR the output before the last layer's bias, else the form of the output plus
+ * *output_bias.
  */
-void mlp_costs(const struct inputs *in, const struct mlp *mlp, const float *markups, float *out, int max_threads) {
-    struct members single = {1, mlp, NULL, 0.f};
+void mlp_costs(const struct inputs *in, const struct mlp *mlp, int form, const float *output_bias, const float *markups,
+               float *out, int max_threads) {
+    struct members single = {1, mlp, output_bias, 0.f, form};
     member_costs(in, &single, markups, out, max_threads);
 }
 
 int ensemble_max_members(void) { return MAX_MEMBERS; }
 
 /*
- * out[c] = sum_{t < steps} markups[t] * e(t, c), where e is the mean of n_members MLPs' outputs z_k + output_biases[k]
- * on the inputs x(t, c) less disagreement times their standard deviation (2 <= n_members <= MAX_MEMBERS, MLPs of the
- * same input size). Held inputs are not taken: in->read and in->group_biases must be NULL (each member would need
- * its own group biases).
+ * out[c] = sum_{t < steps} markups[t] * e(t, c), where e is the form of the mean of n_members MLPs' outputs
+ * z_k + output_biases[k] on the inputs x(t, c) less disagreement times their standard deviation (2 <= n_members <=
+ * MAX_MEMBERS, MLPs of the same input size). Held inputs are not taken: in->read and in->group_biases must be NULL
+ * (each member would need its own group biases).
  */
 void ensemble_costs(const struct inputs *in, const struct mlp *mlps, int n_members, const float *output_biases,
-                    float disagreement, const float *markups, float *out, int max_threads) {
-    struct members ensemble = {n_members, mlps, output_biases, disagreement};
+                    float disagreement, int form, const float *markups, float *out, int max_threads) {
+    struct members ensemble = {n_members, mlps, output_biases, disagreement, form};
     member_costs(in, &ensemble, markups, out, max_threads);
 }

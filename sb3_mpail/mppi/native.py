@@ -42,6 +42,8 @@ SOURCES = {
 COMPILER_FLAGS = ("-O3", "-march=native", "-fno-strict-aliasing", "-fPIC", "-fopenmp")
 #: activation codes of ``mlp_cost.c``, by the fused paths' oneDNN names
 ACTIVATION_CODES = {"relu": 1, "leaky_relu": 2, "tanh": 3}
+#: codes of ``mlp_cost.c``'s output forms, by the names of :data:`~sb3_mpail.mppi.reward_forms.REWARD_FORMS`
+FORM_CODES = {"logit": 0, "softplus": 1, "capped": 2}
 
 
 def _compiler() -> Optional[str]:
@@ -134,11 +136,13 @@ def load_library() -> Optional[ctypes.CDLL]:
     library.mlp_max_width.restype = ctypes.c_int
     library.mlp_costs.restype = None
     pointer = ctypes.c_void_p
-    library.mlp_costs.argtypes = [ctypes.POINTER(_Inputs), ctypes.POINTER(_Mlp), pointer, pointer, ctypes.c_int]
+    library.mlp_costs.argtypes = [
+        ctypes.POINTER(_Inputs), ctypes.POINTER(_Mlp), ctypes.c_int, pointer, pointer, pointer, ctypes.c_int
+    ]  # fmt: skip
     library.ensemble_max_members.restype = ctypes.c_int
     library.ensemble_costs.restype = None
     library.ensemble_costs.argtypes = [
-        ctypes.POINTER(_Inputs), pointer, ctypes.c_int, pointer, ctypes.c_float, pointer, pointer, ctypes.c_int
+        ctypes.POINTER(_Inputs), pointer, ctypes.c_int, pointer, ctypes.c_float, ctypes.c_int, pointer, pointer, ctypes.c_int
     ]  # fmt: skip
     if hasattr(library, "standard_normal_fill"):  # built for CPUs with AVX2 and FMA only
         library.standard_normal_fill.restype = None
@@ -201,7 +205,7 @@ class NativeMlp:
 
     :param library: the loaded kernel
     :param weights: per layer, the weight ``(in, out)``, contiguous float32
-    :param biases: per layer but the last, the bias ``(out,)``
+    :param biases: per layer, the bias ``(out,)``
     :param activation_codes: per layer, the kernel's code of the activation after it (0: none)
     :param slopes: per layer, the negative slope of a leaky ReLU (else unused)
     """
@@ -215,12 +219,13 @@ class NativeMlp:
         slopes: List[float],
     ):
         self.library = library
-        self.weights, self.biases = weights, biases  # kept alive: the kernel reads them through the pointers below
+        # kept alive: the kernel reads them through the pointers below (the output bias only for a nonlinear form)
+        self.weights, self.biases, self.output_bias = weights, biases[:-1], biases[-1]
         n_layers = len(weights)
         self.input_size = weights[0].shape[0]
         self._widths = (ctypes.c_int * (n_layers + 1))(self.input_size, *[weight.shape[1] for weight in weights])
         self._weights = (ctypes.c_void_p * n_layers)(*[weight.data_ptr() for weight in weights])
-        self._biases = (ctypes.c_void_p * n_layers)(*[bias.data_ptr() for bias in biases], None)
+        self._biases = (ctypes.c_void_p * n_layers)(*[bias.data_ptr() for bias in self.biases], None)
         self._activations = (ctypes.c_int * n_layers)(*activation_codes)
         self._slopes = (ctypes.c_float * n_layers)(*slopes)
         self._held_parts: dict = {}  # per (held dims, pairs): the inputs read and the held weight
@@ -239,7 +244,7 @@ class NativeMlp:
     ) -> Optional["NativeMlp"]:
         """
         :param weights: per layer, the weight ``(in, out)`` as the fused paths hold it
-        :param biases: per layer, the bias ``(out,)``; the last layer's is left to the caller
+        :param biases: per layer, the bias ``(out,)``; the last layer's is left to the caller but for a nonlinear form
         :param activations: per layer, the oneDNN name of the activation after it, or ``None``
         :param slopes: per layer, the activation's first argument (a leaky ReLU's slope), else 0
         :return: the kernel's view of the MLP, or ``None`` where the kernel is unavailable or cannot take the MLP
@@ -259,7 +264,7 @@ class NativeMlp:
         return cls(
             library,
             [weight.contiguous() for weight in weights],
-            [bias.contiguous() for bias in biases[:-1]],
+            [bias.contiguous() for bias in biases],
             codes,
             [float(slope) for slope in slopes],
         )
@@ -295,11 +300,18 @@ class NativeMlp:
         return HeldInputs(read_array, group_biases.contiguous(), self.input_size)
 
     def marked_up_sums(
-        self, states: th.Tensor, markups: th.Tensor, pairs: bool, out: th.Tensor, held: Optional[HeldInputs] = None
+        self,
+        states: th.Tensor,
+        markups: th.Tensor,
+        pairs: bool,
+        out: th.Tensor,
+        held: Optional[HeldInputs] = None,
+        form: str = "logit",
     ) -> th.Tensor:
         """
         ``out[c] = sum_t markups[t] z(t, c)``, with ``z`` the MLP's output before its last bias on
-        ``[states[t, c], states[t + 1, c]]`` (``pairs``) or on ``states[t, c]``.
+        ``[states[t, c], states[t + 1, c]]`` (``pairs``) or on ``states[t, c]``; with a ``form`` other than
+        ``"logit"``, that form of the output with its bias.
 
         :param states: ``(steps + 1, columns, state_dim)`` with ``pairs``, else ``(steps, columns, state_dim)``,
             CPU float32, any strides (read in place)
@@ -308,6 +320,7 @@ class NativeMlp:
         :param out: ``(columns,)``, contiguous CPU float32
         :param held: inputs constant within each env's columns (from :meth:`hold`), which are then not read; the
             columns are the envs' in turn, as many per env
+        :param form: a key of :data:`FORM_CODES`
         :return: ``out``
         """
         read, n_read, group_biases, group_columns = None, self.input_size, None, 0
@@ -322,8 +335,10 @@ class NativeMlp:
         inputs, markups = _kernel_inputs(
             states, markups, pairs, out, self.input_size, n_read, read, group_biases, group_columns
         )  # fmt: skip
-        threads = th.get_num_threads()
-        self.library.mlp_costs(ctypes.byref(inputs), ctypes.byref(self._mlp), markups.data_ptr(), out.data_ptr(), threads)
+        self.library.mlp_costs(
+            ctypes.byref(inputs), ctypes.byref(self._mlp), FORM_CODES[form], self.output_bias.data_ptr(), markups.data_ptr(),
+            out.data_ptr(), th.get_num_threads(),
+        )  # fmt: skip
         return out
 
 
@@ -398,16 +413,18 @@ class NativeEnsemble:
             return None
         return cls(members, output_biases, disagreement)
 
-    def marked_up_sums(self, states: th.Tensor, markups: th.Tensor, pairs: bool, out: th.Tensor) -> th.Tensor:
+    def marked_up_sums(
+        self, states: th.Tensor, markups: th.Tensor, pairs: bool, out: th.Tensor, form: str = "logit"
+    ) -> th.Tensor:
         """
-        ``out[c] = sum_t markups[t] e(t, c)``, with ``e`` the ensemble's combined output (biases included) on
-        ``[states[t, c], states[t + 1, c]]`` (``pairs``) or on ``states[t, c]``; arguments as
+        ``out[c] = sum_t markups[t] e(t, c)``, with ``e`` the ``form`` of the ensemble's combined output (biases
+        included) on ``[states[t, c], states[t + 1, c]]`` (``pairs``) or on ``states[t, c]``; arguments as
         :meth:`NativeMlp.marked_up_sums`'s, every input read.
         """
         inputs, markups = _kernel_inputs(states, markups, pairs, out, self.input_size, self.input_size)
         self.library.ensemble_costs(
             ctypes.byref(inputs), ctypes.addressof(self._mlps), len(self.members), self.output_biases.data_ptr(),
-            self.disagreement, markups.data_ptr(), out.data_ptr(), th.get_num_threads(),
+            self.disagreement, FORM_CODES[form], markups.data_ptr(), out.data_ptr(), th.get_num_threads(),
         )  # fmt: skip
         return out
 
