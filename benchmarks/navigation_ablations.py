@@ -149,6 +149,16 @@ VARIANTS: Dict[str, Variant] = {
         "both: the capped reward on the 5-discriminator ensemble with its disagreement term",
         lambda: dict(reward_form="capped", discriminator_ensemble_size=5, discriminator_disagreement=1.0),
     ),
+    "value-ensemble": Variant(
+        "5 value networks, the terminal value their mean less their standard deviation (disagreement lowers the value "
+        "where the networks extrapolate differently: past the goal, far from the visited states)",
+        lambda: dict(value_ensemble_size=5, value_disagreement=1.0),
+    ),
+    "both-ensembles": Variant(
+        "5 discriminators and 5 value networks, each ensemble its mean less its standard deviation",
+        lambda: dict(discriminator_ensemble_size=5, discriminator_disagreement=1.0, value_ensemble_size=5,
+                     value_disagreement=1.0),
+    ),
     "discriminator-ensemble": Variant(
         "5 discriminators, the cost their mean logit less their standard deviation (disagreement as an OOD penalty)",
         lambda: dict(discriminator_ensemble_size=5, discriminator_disagreement=1.0),

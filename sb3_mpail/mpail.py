@@ -44,6 +44,7 @@ from sb3_mpail.checks import (
 )
 from sb3_mpail.demos import DemoSource, ExpertTransitions, load_demos
 from sb3_mpail.model_files import check_model_file, raise_for_unpicklable_settings, save_atomically
+from sb3_mpail.mppi.costs import member_values
 from sb3_mpail.mppi.dynamics import DEFAULT_DYNAMICS, ENV_DYNAMICS_KWARGS, LearnedDynamics, how_to_give_dynamics
 from sb3_mpail.mppi.ensemble import member_logits
 from sb3_mpail.policies import NON_FINITE_OBSERVATION, MlpMPPI, MPPIPolicy
@@ -731,15 +732,22 @@ class MPAIL(BaseAlgorithm):
         return self.discriminator_replay
 
     def _train_value(self, observations: th.Tensor) -> None:
-        """Clipped regression of ``V_phi`` onto the GAE returns, as PPO's value loss."""
+        """
+        Clipped regression of ``V_phi`` onto the GAE returns, as PPO's value loss; each member of a value ensemble on
+        its own, clipped about its own values before the update.
+        """
         buffer = self.rollout_buffer
         returns = self._tensor(buffer.flat("returns"))
-        old_values = self._tensor(buffer.flat("values"))
+        old_values = self._tensor(buffer.flat("values")).unsqueeze(0)  # (networks, rows)
+        if self.policy.value_ensemble_size > 1:
+            with th.no_grad():
+                old_values = member_values(self.policy.value_net, observations)
         losses = []
         for _ in range(self.n_epochs):
             for batch in self._minibatches(len(observations)):
-                values = self.policy.value_net(observations[batch]).squeeze(-1)
-                clipped = old_values[batch] + th.clamp(values - old_values[batch], -self.value_clip, self.value_clip)
+                values = member_values(self.policy.value_net, observations[batch])
+                old = old_values[:, batch]
+                clipped = old + th.clamp(values - old, -self.value_clip, self.value_clip)
                 loss = th.max((values - returns[batch]).square(), (clipped - returns[batch]).square()).mean()
                 self.value_optimizer.zero_grad()
                 loss.backward()

@@ -38,7 +38,7 @@ from sb3_mpail.mppi.costs import (
     make_value_network,
 )
 from sb3_mpail.mppi.dynamics import DynamicsSpec, LearnedDynamics, make_dynamics
-from sb3_mpail.mppi.ensemble import DiscriminatorEnsemble
+from sb3_mpail.mppi.ensemble import DiscriminatorEnsemble, ValueEnsemble
 from sb3_mpail.mppi.planner import MPPIPlanner, weighted_action_std
 from sb3_mpail.mppi.reward_forms import REWARD_FORMS
 from sb3_mpail.mppi.sampling import make_sampler
@@ -101,6 +101,11 @@ class MPPIPolicy(BasePolicy):
         instead of extrapolating linearly (:func:`~sb3_mpail.mppi.costs.make_value_network`)
     :param concave_value: a value concave in its inputs (:class:`~sb3_mpail.mppi.costs.ConcaveValue`): it peaks on one
         region it learns and falls away from it in every direction, never rising far from the data
+    :param value_ensemble_size: ``K`` value networks instead of one, each regressed on the returns, the value their
+        mean less ``value_disagreement`` times their standard deviation (:class:`~sb3_mpail.mppi.ensemble.ValueEnsemble`):
+        states far from the visited ones, where the members extrapolate differently, are worth less. ``1``: one
+        network (the paper's)
+    :param value_disagreement: weight of the value ensemble's standard deviation, ``>= 0``
     :param use_spectral_norm: spectral normalisation on the discriminator's layers
     :param discriminator_ensemble_size: ``K`` discriminators instead of one, the reward and step cost their mean logit
         less ``discriminator_disagreement`` times their standard deviation
@@ -179,6 +184,8 @@ class MPPIPolicy(BasePolicy):
         value_hidden_sizes: Sequence[int] = (32, 32),
         value_layer_norm: bool = False,
         concave_value: bool = False,
+        value_ensemble_size: int = 1,
+        value_disagreement: float = 1.0,
         use_spectral_norm: bool = True,
         discriminator_ensemble_size: int = 1,
         discriminator_disagreement: float = 1.0,
@@ -221,6 +228,8 @@ class MPPIPolicy(BasePolicy):
             value_hidden_sizes=(value_hidden_sizes, HIDDEN_SIZES),
             value_layer_norm=(value_layer_norm, BOOLEAN),
             concave_value=(concave_value, BOOLEAN),
+            value_ensemble_size=(value_ensemble_size, POSITIVE_INTEGER),
+            value_disagreement=(value_disagreement, NON_NEGATIVE_NUMBER),
             sampler_kwargs=(sampler_kwargs, OPTIONAL_DICT),
             policy_prior=(policy_prior, BOOLEAN),
             prior_kwargs=(prior_kwargs, OPTIONAL_DICT),
@@ -248,6 +257,8 @@ class MPPIPolicy(BasePolicy):
             value_hidden_sizes=value_hidden_sizes,
             value_layer_norm=value_layer_norm,
             concave_value=concave_value,
+            value_ensemble_size=value_ensemble_size,
+            value_disagreement=value_disagreement,
             use_spectral_norm=use_spectral_norm,
             discriminator_ensemble_size=discriminator_ensemble_size,
             discriminator_disagreement=discriminator_disagreement,
@@ -287,7 +298,16 @@ class MPPIPolicy(BasePolicy):
         self.discriminator = discriminators[0]
         if discriminator_ensemble_size > 1:
             self.discriminator = DiscriminatorEnsemble(discriminators, discriminator_disagreement)
-        self.value_net = make_value_network(observation_space.shape[0], value_hidden_sizes, value_layer_norm, concave_value)
+
+        def make_value(n_inputs: int) -> nn.Module:
+            networks = [
+                make_value_network(n_inputs, value_hidden_sizes, value_layer_norm, concave_value)
+                for _ in range(value_ensemble_size)
+            ]
+            return networks[0] if value_ensemble_size == 1 else ValueEnsemble(networks, value_disagreement)
+
+        self.value_ensemble_size = value_ensemble_size
+        self.value_net = make_value(observation_space.shape[0])
         value_map, value_inputs = None, observation_space.shape[0]
         if value_features is not None:
             value_map = FeatureMap.wrap(value_features, "value_features").requires_grad_(False)  # fixed: not optimised
@@ -295,9 +315,7 @@ class MPPIPolicy(BasePolicy):
         if standardise_inputs:
             value_map = StandardisedFeatures(value_map, value_inputs, min_input_scale)
         if value_map is not None:
-            self.value_net = MappedNetwork(
-                value_map, make_value_network(value_inputs, value_hidden_sizes, value_layer_norm, concave_value)
-            )
+            self.value_net = MappedNetwork(value_map, make_value(value_inputs))
         self.dynamics = make_dynamics(dynamics, observation_space, action_space, dynamics_kwargs)
         self.prior = PolicyPrior(observation_space, action_space, **(prior_kwargs or {})) if policy_prior else None
         if terminal_value is None:

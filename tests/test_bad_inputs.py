@@ -189,6 +189,8 @@ def test_an_out_of_range_mpail_setting_is_refused_naming_it(setting, value, expe
         ("value_hidden_sizes", 32, "a sequence of positive integers"),
         ("discriminator_ensemble_size", 0, "a positive integer"),
         ("discriminator_disagreement", -1.0, "a finite number >= 0"),
+        ("value_ensemble_size", 1.5, "a positive integer"),
+        ("value_disagreement", -1.0, "a finite number >= 0"),
         ("reward_form", "gail", "one of ['logit', 'softplus', 'capped']"),
         ("reward_offset", float("nan"), "a finite number"),
         ("dynamics_kwargs", "dict()", "a dict or None"),

@@ -13,7 +13,8 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
 from sb3_mpail import MPAIL
-from sb3_mpail.mppi import ConcaveValue, DiscriminatorEnsemble, make_value_network
+from sb3_mpail.mppi import ConcaveValue, DiscriminatorEnsemble, ValueEnsemble, make_value_network
+from sb3_mpail.mppi.costs import member_values
 from sb3_mpail.mppi.fused import Workspace
 from sb3_mpail.mppi.reward_forms import REWARD_FORMS
 
@@ -376,6 +377,30 @@ def test_a_concave_value_plans_behind_a_feature_map_and_refuses_layer_norm(demos
     assert any(isinstance(module, ConcaveValue) for module in model.policy.value_net.modules())
     with pytest.raises(ValueError, match="set value_layer_norm or concave_value, not both"):
         make_model(demos, policy_kwargs=dict(TINY_PLANNER, concave_value=True, value_layer_norm=True))
+
+
+def test_a_value_ensemble_values_states_at_its_mean_less_its_spread_and_regresses_every_member(demos, tmp_path):
+    planner = dict(TINY_PLANNER, value_ensemble_size=3, value_disagreement=2.0, value_features=[0, 1])
+    model = make_model(demos, policy_kwargs=planner)
+    ensemble = model.policy.value_net.network
+    assert isinstance(ensemble, ValueEnsemble) and len(ensemble.members) == 3
+    states = th.randn(5, 3)
+    before = [th.cat([p.detach().flatten().clone() for p in member.parameters()]) for member in ensemble.members]
+    model.learn(32)
+    after = [th.cat([p.detach().flatten() for p in member.parameters()]) for member in ensemble.members]
+    assert all(not th.equal(old, new) for old, new in zip(before, after))
+    model.policy.set_training_mode(False)
+    with th.no_grad():
+        members = th.stack([member(states[:, :2])[:, 0] for member in ensemble.members])
+        assert not th.allclose(members[0], members[1])  # each from its own initialisation
+        assert th.allclose(member_values(model.policy.value_net, states), members)
+        expected = members.mean(0) - 2.0 * members.std(0, unbiased=False)
+        assert th.allclose(model.policy.value_net(states)[:, 0], expected)
+        assert th.allclose(model.policy.planner.terminal_value(states), expected)
+    observation = np.array([[0.5, 0.5, 0.1]], np.float32)
+    action, _ = model.predict(observation, deterministic=True)
+    model.save(tmp_path / "model")
+    assert np.array_equal(MPAIL.load(tmp_path / "model").predict(observation, deterministic=True)[0], action)
 
 
 def test_a_discriminator_ensemble_costs_its_mean_logit_less_its_spread_and_trains_every_member(demos, tmp_path):

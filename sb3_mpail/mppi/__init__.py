@@ -25,7 +25,7 @@ from sb3_mpail.mppi.dynamics import (
     TransitionReplayBuffer,
     make_dynamics,
 )
-from sb3_mpail.mppi.ensemble import DiscriminatorEnsemble
+from sb3_mpail.mppi.ensemble import DiscriminatorEnsemble, ValueEnsemble
 from sb3_mpail.mppi.highway_dynamics import (  # also registers them by name
     HighwayKinematics,
     HighwayTrafficKinematics,
@@ -61,6 +61,7 @@ __all__ = [
     "TerminalValue",
     "TransitionCost",
     "TransitionReplayBuffer",
+    "ValueEnsemble",
     "highway_env_lane_centrelines",
     "make_dynamics",
     "make_transition_discriminator",

@@ -18,7 +18,7 @@ from stable_baselines3.common.torch_layers import create_mlp
 from torch import nn
 from torch.nn.utils.parametrizations import spectral_norm
 
-from sb3_mpail.mppi.ensemble import DiscriminatorEnsemble, FrozenEnsembleCost, frozen_members
+from sb3_mpail.mppi.ensemble import DiscriminatorEnsemble, FrozenEnsembleCost, ValueEnsemble, frozen_members
 from sb3_mpail.mppi.fused import FrozenMlp, FusedTransitionCost, FusedValue, ViewCache, freeze_mlp, fused_mlp_ok
 from sb3_mpail.mppi.reward_forms import REWARD_FORMS
 
@@ -734,6 +734,19 @@ class MappedNetwork(nn.Module):
 
     def forward(self, states: th.Tensor) -> th.Tensor:
         return self.network(self.features(states))
+
+
+def member_values(value_network: nn.Module, states: th.Tensor) -> th.Tensor:
+    """
+    The values each network of ``value_network`` regresses on the returns, ``(K, batch)``, on ``(batch, state_dim)``
+    states: a :class:`~sb3_mpail.mppi.ensemble.ValueEnsemble`'s members', or a single network's as ``(1, batch)``,
+    behind the feature map of a :class:`MappedNetwork`.
+    """
+    if isinstance(value_network, MappedNetwork):
+        states, value_network = value_network.features(states), value_network.network
+    if isinstance(value_network, ValueEnsemble):
+        return value_network.member_values(states)
+    return value_network(states).view(1, -1)
 
 
 class MappedView:

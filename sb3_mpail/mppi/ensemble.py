@@ -1,6 +1,7 @@
 """
-Discriminator ensembles: several logits ``d_k(s, s')`` whose disagreement marks the transitions none of them was
-trained near, so that a planner can treat them as less expert-like than any single network's extrapolation says.
+Ensembles of discriminators and of values: several logits ``d_k(s, s')`` or values ``V_k(s)`` whose disagreement marks
+the transitions or states none of them was trained near, so that a planner can treat them as worse than any single
+network's extrapolation says.
 """
 
 from typing import List, Optional, Sequence
@@ -37,8 +38,39 @@ class DiscriminatorEnsemble(nn.Module):
         return th.stack([member(state, None, next_state, None) for member in self.members])
 
     def forward(self, state: th.Tensor, action: None, next_state: th.Tensor, done: None) -> th.Tensor:
-        logits = self.member_logits(state, next_state)
-        return logits.mean(dim=0) - self.disagreement * logits.std(dim=0, unbiased=False)
+        return pessimistic_mean(self.member_logits(state, next_state), self.disagreement)
+
+
+def pessimistic_mean(outputs: th.Tensor, disagreement: float) -> th.Tensor:
+    """The mean of ``(K, batch)`` members' outputs less ``disagreement`` times their standard deviation, ``(batch,)``."""
+    return outputs.mean(dim=0) - disagreement * outputs.std(dim=0, unbiased=False)
+
+
+class ValueEnsemble(nn.Module):
+    """
+    ``K`` value networks, each regressed on the same returns from its own initialisation. The value it gives (the
+    planner's terminal value and the returns' bootstrap) is their mean less ``disagreement`` times their standard
+    deviation: on the states the agent visits they agree; far from them each extrapolates its own learned slope (a
+    ReLU network's far field is linear), and the spread lowers the value there, so that no single network's
+    extrapolation draws the planner away from the data.
+
+    :param members: the value networks, ``(batch, state_dim)`` to ``(batch, 1)``
+    :param disagreement: weight of the members' standard deviation, ``>= 0`` (``0``: their mean)
+    """
+
+    def __init__(self, members: Sequence[nn.Module], disagreement: float = 1.0):
+        super().__init__()
+        if len(members) < 2:
+            raise ValueError(f"An ensemble needs at least 2 value networks; got {len(members)}.")
+        self.members = nn.ModuleList(members)
+        self.disagreement = float(disagreement)
+
+    def member_values(self, states: th.Tensor) -> th.Tensor:
+        """Each member's values ``(K, batch)`` on ``(batch, state_dim)`` states."""
+        return th.stack([member(states)[:, 0] for member in self.members])
+
+    def forward(self, states: th.Tensor) -> th.Tensor:
+        return pessimistic_mean(self.member_values(states), self.disagreement).unsqueeze(-1)
 
 
 def member_logits(discriminator: nn.Module, state: th.Tensor, next_state: th.Tensor) -> th.Tensor:
