@@ -53,15 +53,17 @@ def test_kernel_transition_costs_match_the_torch_path(activation, feature_major)
     assert th.allclose(kernel, torch_path, atol=1e-5, rtol=1e-5), (kernel - torch_path).abs().max()
 
 
+def leaky_relu_network(widths: list) -> nn.Sequential:
+    """An MLP in eval mode: LeakyReLU(0.2) layers of ``widths`` (the first the input size), then one output."""
+    layers = []
+    for n_in, n_out in zip(widths, widths[1:]):
+        layers += [nn.Linear(n_in, n_out), nn.LeakyReLU(0.2)]
+    return nn.Sequential(*layers, nn.Linear(widths[-1], 1)).eval()
+
+
 def ensemble_members(widths: list, n_members: int = 5) -> list:
     th.manual_seed(0)
-    members = []
-    for _ in range(n_members):
-        layers = []
-        for n_in, n_out in zip(widths, widths[1:]):
-            layers += [nn.Linear(n_in, n_out), nn.LeakyReLU(0.2)]
-        members.append(nn.Sequential(*layers, nn.Linear(widths[-1], 1)).eval())
-    return members
+    return [leaky_relu_network(widths) for _ in range(n_members)]
 
 
 def ensemble_costs(members: list, states: th.Tensor, disagreement: float, use_kernel: bool, *reward) -> th.Tensor:
@@ -118,11 +120,7 @@ def held_rolled_out_states(held_dims: list, n_envs: int = 3, n_samples: int = 67
 @pytest.mark.parametrize("hidden_layers", [0, 2])
 def test_kernel_costs_with_held_state_dims_match_the_torch_path(held_dims, hidden_layers):
     # 67 samples per env: blocks of 16 or 32 columns straddle two envs, whose held values differ
-    widths = [14, 17, 6][: hidden_layers + 1]
-    layers = []
-    for n_in, n_out in zip(widths, widths[1:]):
-        layers += [nn.Linear(n_in, n_out), nn.LeakyReLU(0.2)]
-    mlp = frozen_network(layers + [nn.Linear(widths[-1], 1)])
+    mlp = fused.freeze_mlp(leaky_relu_network([14, 17, 6][: hidden_layers + 1]))
     states, initial_states = held_rolled_out_states(held_dims)
     markups = 1.01 ** th.arange(4, dtype=th.float32)
     cost = fused.FusedTransitionCost(mlp, 7)
@@ -156,15 +154,10 @@ def spread_logits(output_layers: list, logits: Callable[[], th.Tensor]) -> th.Te
     return spread
 
 
-# logits from -60 to 60: both sides of softplus's threshold of 20, where torch switches to the identity
 @pytest.mark.parametrize("reward_form", ["softplus", "capped"])
 @pytest.mark.parametrize("hidden_layers", [0, 2])
 def test_kernel_costs_in_each_reward_form_match_the_torch_path_and_the_module(reward_form, hidden_layers):
-    widths = [14, 17, 6][: hidden_layers + 1]
-    layers = []
-    for n_in, n_out in zip(widths, widths[1:]):
-        layers += [nn.Linear(n_in, n_out), nn.LeakyReLU(0.2)]
-    network = nn.Sequential(*layers, nn.Linear(widths[-1], 1)).eval()
+    network = leaky_relu_network([14, 17, 6][: hidden_layers + 1])
     states, initial_states = held_rolled_out_states([1, 4, 5])
     logits = spread_logits([network[-1]], lambda: network(th.cat([states[:-1], states[1:]], dim=-1))[..., 0])
     module = marked_up_rewards(logits, reward_form, 0.7)

@@ -14,7 +14,24 @@ from sb3_mpail.mppi.native import NativeEnsemble
 from sb3_mpail.mppi.reward_forms import REWARD_FORMS
 
 
-class DiscriminatorEnsemble(nn.Module):
+class _Ensemble(nn.Module):
+    """
+    ``K >= 2`` networks and the weight of their standard deviation in what the ensemble gives.
+
+    :param members: the networks
+    :param disagreement: weight of the members' standard deviation, ``>= 0`` (``0``: their mean)
+    :param kind: what the members are, for the error message
+    """
+
+    def __init__(self, members: Sequence[nn.Module], disagreement: float, kind: str):
+        super().__init__()
+        if len(members) < 2:
+            raise ValueError(f"An ensemble needs at least 2 {kind}; got {len(members)}.")
+        self.members = nn.ModuleList(members)
+        self.disagreement = float(disagreement)
+
+
+class DiscriminatorEnsemble(_Ensemble):
     """
     ``K`` discriminators on ``(s, s')``, trained on the same batches from different initialisations. The logit it
     gives (the reward, and the planner's negated step cost) is their mean less ``disagreement`` times their standard
@@ -27,11 +44,7 @@ class DiscriminatorEnsemble(nn.Module):
     """
 
     def __init__(self, members: Sequence[nn.Module], disagreement: float = 1.0):
-        super().__init__()
-        if len(members) < 2:
-            raise ValueError(f"An ensemble needs at least 2 discriminators; got {len(members)}.")
-        self.members = nn.ModuleList(members)
-        self.disagreement = float(disagreement)
+        super().__init__(members, disagreement, "discriminators")
 
     def member_logits(self, state: th.Tensor, next_state: th.Tensor) -> th.Tensor:
         """Each member's logits ``(K, batch)`` on ``(batch, n_features)`` states and next states."""
@@ -46,7 +59,7 @@ def pessimistic_mean(outputs: th.Tensor, disagreement: float) -> th.Tensor:
     return outputs.mean(dim=0) - disagreement * outputs.std(dim=0, unbiased=False)
 
 
-class ValueEnsemble(nn.Module):
+class ValueEnsemble(_Ensemble):
     """
     ``K`` value networks, each regressed on the same returns from its own initialisation. The value it gives (the
     planner's terminal value and the returns' bootstrap) is their mean less ``disagreement`` times their standard
@@ -59,11 +72,7 @@ class ValueEnsemble(nn.Module):
     """
 
     def __init__(self, members: Sequence[nn.Module], disagreement: float = 1.0):
-        super().__init__()
-        if len(members) < 2:
-            raise ValueError(f"An ensemble needs at least 2 value networks; got {len(members)}.")
-        self.members = nn.ModuleList(members)
-        self.disagreement = float(disagreement)
+        super().__init__(members, disagreement, "value networks")
 
     def member_values(self, states: th.Tensor) -> th.Tensor:
         """Each member's values ``(K, batch)`` on ``(batch, state_dim)`` states."""
