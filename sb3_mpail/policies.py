@@ -143,7 +143,8 @@ class MPPIPolicy(BasePolicy):
         (default), ``True`` or a ``torch.compile`` mode (``"reduce-overhead"`` uses CUDA graphs on a GPU); same plans
     :param policy_prior: learned-model MPAIL's policy prior (:class:`~sb3_mpail.prior.PolicyPrior`, trained off-policy
         by :class:`~sb3_mpail.MPAIL` on the learned reward): its actor proposes ``n_proposals`` of the sequences and
-        its Q ensemble is the terminal value (unless ``terminal_value`` is given); ``False``: the paper's planner
+        its Q ensemble is the terminal value (unless ``terminal_value`` is given), so the value network's settings
+        (``value_ensemble_size``, ``value_layer_norm``, ``concave_value``) are refused with it; ``False``: the paper's planner
     :param prior_kwargs: keyword arguments of the :class:`~sb3_mpail.prior.PolicyPrior` (``net_arch``, ``n_critics``,
         ``learning_rate``, ``gamma``, ``tau``)
     :param n_proposals: sequences per env the prior adds to each iteration's ``n_samples``
@@ -239,6 +240,14 @@ class MPPIPolicy(BasePolicy):
             reward_form=(reward_form, one_of(tuple(REWARD_FORMS))),
             reward_offset=(reward_offset, FINITE_NUMBER),
         )
+        value_settings = dict(value_ensemble_size=value_ensemble_size != 1, value_layer_norm=value_layer_norm,
+                              concave_value=concave_value)  # fmt: skip
+        if policy_prior and any(value_settings.values()):
+            raise ValueError(
+                "With policy_prior=True the prior's Q ensemble is the terminal value and the value network is neither "
+                f"trained nor planned with, so {', '.join(name for name, set_ in value_settings.items() if set_)} would "
+                "change nothing: leave it at its default, or set policy_prior=False."
+            )
         if step_cost is not None:
             check_signature(step_cost, "step_cost", "c(states, next_states) -> costs", 2)
         if terminal_value is not None:

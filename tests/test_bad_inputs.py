@@ -208,6 +208,16 @@ def test_every_bad_setting_is_named_at_once():
         MPAIL("MlpMPPI", "Pendulum-v1", n_steps=0, gamma=2, min_temperature=-1.0)
 
 
+@pytest.mark.parametrize(
+    "value_setting", [dict(value_ensemble_size=3), dict(value_layer_norm=True), dict(concave_value=True)], ids=str
+)
+def test_a_value_network_setting_with_the_policy_prior_is_refused_naming_it(value_setting):
+    (name,) = value_setting
+    with pytest.raises(ValueError, match=f"value network is neither trained nor planned with, so {name} would change nothing"):
+        MPPIPolicy(spaces.Box(-1.0, 1.0, (4,), np.float32), spaces.Box(-1.0, 1.0, (2,), np.float32), dynamics="learned",
+                   policy_prior=True, **value_setting)  # fmt: skip
+
+
 def test_an_unknown_sampler_is_refused_naming_the_known_ones():
     with pytest.raises(ValueError, match=r"Unknown sampler 'uniform': expected one of \['delta', 'gaussian'\]"):
         MPAIL("MlpMPPI", "Pendulum-v1", policy_kwargs=dict(sampler="uniform"))
