@@ -128,6 +128,16 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         question="the discriminator also sees the last 50,000 agent transitions",
         changes=dict(discriminator_replay_size=50_000),
     ),
+    "slower-discriminator": dict(
+        question="the discriminator updated every third rollout (the paper's 3:1 ratio) instead of every rollout: a "
+        "learned reward that moves more slowly than the prior learns it",
+        changes=dict(discriminator_update_interval=3),
+    ),
+    "ensemble-replay": dict(
+        question="both: 5 discriminators (mean less standard deviation) that also see the last 50,000 agent transitions",
+        changes=dict(discriminator_replay_size=50_000,
+                     policy_kwargs=dict(discriminator_ensemble_size=5, discriminator_disagreement=1.0)),  # fmt: skip
+    ),
     "discriminator-ensemble": dict(
         question="5 discriminators, the learned reward their mean logit less their standard deviation (the navigation "
         "OOD lead: a reward that stops rising where the members disagree, beyond the demos' speeds)",
