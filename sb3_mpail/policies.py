@@ -246,7 +246,7 @@ class MPPIPolicy(BasePolicy):
             raise ValueError(
                 "With policy_prior=True the prior's Q ensemble is the terminal value and the value network is neither "
                 f"trained nor planned with, so {', '.join(name for name, set_ in value_settings.items() if set_)} would "
-                "change nothing: leave it at its default, or set policy_prior=False."
+                "change nothing: leave each at its default, or set policy_prior=False."
             )
         if step_cost is not None:
             check_signature(step_cost, "step_cost", "c(states, next_states) -> costs", 2)
