@@ -138,6 +138,12 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         changes=dict(discriminator_replay_size=50_000,
                      policy_kwargs=dict(discriminator_ensemble_size=5, discriminator_disagreement=1.0)),  # fmt: skip
     ),
+    "agent-reward-mean": dict(
+        question="the learned reward that trains the prior's Q shifted after every rollout so that the rollout's mean is "
+        "0.2 (agent_reward_mean=0.2): staying up pays a little whatever the discriminator makes of the agent, where "
+        "the logit's mean turns negative before every collapse and a constant bonus of 1 taught standing",
+        changes=dict(agent_reward_mean=0.2),
+    ),
     "discriminator-ensemble": dict(
         question="5 discriminators, the learned reward their mean logit less their standard deviation (the navigation "
         "OOD lead: a reward that stops rising where the members disagree, beyond the demos' speeds)",

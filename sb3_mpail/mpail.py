@@ -30,6 +30,7 @@ from sb3_mpail.checks import (
     NON_NEGATIVE_INTEGER,
     NON_NEGATIVE_NUMBER,
     OPTIONAL_DICT,
+    OPTIONAL_FINITE_NUMBER,
     OPTIONAL_POSITIVE_INTEGER,
     POSITIVE_INTEGER,
     POSITIVE_NUMBER,
@@ -123,6 +124,13 @@ class MPAIL(BaseAlgorithm):
         SAC's do; ``"bootstrap"`` goes on through it (MPAIL2's default), which let the Ant fall in most episodes here;
         ``"absorbing"`` lets the terminal transition's learned reward repeat forever (an absorbing state, as DAC's),
         so ending an episode is worth what the discriminator thinks of how it ends, whatever the reward's offset
+    :param agent_reward_mean: where set, the learned reward that trains the value (or the policy prior's Q) is shifted
+        after every rollout so that its mean over that rollout's transitions is this (the shift is logged as
+        ``train/reward_shift`` and saved with the model). A constant added to every transition leaves the planner's
+        choices within its horizon as they were, but where falls end episodes it decides whether staying up pays: as
+        the discriminator learns to tell the agent's steps apart, their logit turns negative and falling looks best; a
+        small positive mean keeps staying up worth a little, whatever the discriminator makes of the agent. ``None``:
+        no shift (the paper's)
     :param stats_window_size: episodes averaged in the logged episode return
     :param tensorboard_log: tensorboard log folder
     :param policy_kwargs: keyword arguments of the policy (planner settings, ``dynamics``)
@@ -167,6 +175,7 @@ class MPAIL(BaseAlgorithm):
         prior_batch_size: int = 256,
         prior_updates_per_step: float = 1.0,
         prior_terminations: str = "cut",
+        agent_reward_mean: float | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         policy_kwargs: Dict[str, Any] | None = None,
@@ -214,6 +223,8 @@ class MPAIL(BaseAlgorithm):
         self.prior_updates_per_step = prior_updates_per_step
         self.prior_terminations = prior_terminations
         self.prior_replay: PriorReplay | None = None
+        self.agent_reward_mean = agent_reward_mean
+        self.reward_shift = 0.0
         self.episodes_completed = 0
         self.n_iterations = 0
         self.expert: ExpertTransitions | None = None
@@ -257,6 +268,7 @@ class MPAIL(BaseAlgorithm):
             prior_batch_size=(self.prior_batch_size, POSITIVE_INTEGER),
             prior_updates_per_step=(self.prior_updates_per_step, NON_NEGATIVE_NUMBER),
             prior_terminations=(self.prior_terminations, one_of(PRIOR_TERMINATIONS)),
+            agent_reward_mean=(self.agent_reward_mean, OPTIONAL_FINITE_NUMBER),
             stats_window_size=(self._stats_window_size, POSITIVE_INTEGER),
             policy_kwargs=(self.policy_kwargs, OPTIONAL_DICT),
             verbose=(self.verbose, NON_NEGATIVE_INTEGER),
@@ -603,20 +615,30 @@ class MPAIL(BaseAlgorithm):
         with th.no_grad():
             observations = self._tensor(buffer.flat("observations"))
             next_observations = self._tensor(buffer.flat("next_observations"))
-            rewards = self._learned_reward(observations, next_observations)
+            rewards = self.policy.learned_reward(observations, next_observations)
             next_values = self.policy.value_net(next_observations).squeeze(-1)
             values = self.policy.value_net(observations).squeeze(-1)
             last_values = self.policy.value_net(self._tensor(last_obs)).squeeze(-1)
         timeouts = self._tensor(buffer.flat("timeouts"))
         # a time-limit cut is not a real end: bootstrap it with the value of the state reached, as SB3's PPO does
-        buffer.rewards = (rewards + self.gamma * next_values * timeouts).cpu().numpy().reshape(shape)
+        buffer.rewards = (rewards + self.reward_shift + self.gamma * next_values * timeouts).cpu().numpy().reshape(shape)
         buffer.values = values.cpu().numpy().reshape(shape)
         buffer.compute_returns_and_advantage(last_values, dones)
         self.logger.record("rollout/learned_reward_mean", rewards.mean().item())
 
     def _learned_reward(self, observations: th.Tensor, next_observations: th.Tensor) -> th.Tensor:
-        """``r(d_theta(s, s'))`` on ``(batch, obs_dim)`` observations, ``(batch,)``, in the policy's ``reward_form``."""
-        return self.policy.learned_reward(observations, next_observations)
+        """
+        The reward the value or the prior's Q learns on ``(batch, obs_dim)`` observations, ``(batch,)``: the policy's
+        learned reward plus the ``agent_reward_mean`` shift.
+        """
+        return self.policy.learned_reward(observations, next_observations) + self.reward_shift
+
+    def _shift_learned_reward(self, observations: th.Tensor, next_observations: th.Tensor) -> None:
+        """Sets the shift that brings the learned reward's mean over the rollout's transitions to ``agent_reward_mean``."""
+        with th.no_grad():
+            rollout_mean = self.policy.learned_reward(observations, next_observations).mean().item()
+        self.reward_shift = self.agent_reward_mean - rollout_mean
+        self.logger.record("train/reward_shift", self.reward_shift)
 
     def _prior_replay(self) -> PriorReplay:
         """The policy prior's replay of every transition (created on first use; never saved, as SB3's replay buffers)."""
@@ -648,6 +670,8 @@ class MPAIL(BaseAlgorithm):
         whole_rollout = buffer.buffer_size == self.n_steps
         if whole_rollout and (self.n_iterations - 1) % self.discriminator_update_interval == 0:
             self._train_discriminator(observations, next_observations)
+        if self.agent_reward_mean is not None:
+            self._shift_learned_reward(observations, next_observations)
         if self.policy.prior is None:
             self._train_value(observations)
         else:  # the prior's Q ensemble, trained off-policy, is the planner's value

@@ -203,6 +203,38 @@ def test_rewards_are_the_discriminator_logit_of_the_true_transition(demos):
     np.testing.assert_allclose(buffer.rewards[:199, 0], logits.numpy(), rtol=1e-5, atol=1e-6)
 
 
+def test_agent_reward_mean_shifts_the_priors_reward_to_that_rollout_mean_and_leaves_the_planners_costs(demos, tmp_path):
+    planner = dict(TINY_PLANNER, policy_prior=True, n_proposals=2, prior_kwargs=dict(net_arch=(8,)))
+    settings = dict(discriminator_update_interval=1, prior_batch_size=8, policy_kwargs=planner)
+    model = make_model(demos, agent_reward_mean=0.3, **settings).learn(32)
+    buffer = model.rollout_buffer
+    observations, next_observations = (th.as_tensor(buffer.flat(name)) for name in ("observations", "next_observations"))
+    with th.no_grad():
+        trained = model._learned_reward(observations, next_observations)
+        planned = -model.policy.planner.step_cost(observations, next_observations)
+    assert trained.mean().item() == pytest.approx(0.3, abs=1e-5)
+    assert model.reward_shift != 0.0 and th.allclose(trained, planned + model.reward_shift)
+    model.save(tmp_path / "model")
+    assert MPAIL.load(tmp_path / "model").reward_shift == model.reward_shift
+    unshifted = make_model(demos, **settings).learn(32)
+    assert unshifted.reward_shift == 0.0
+    assert th.allclose(unshifted._learned_reward(observations, next_observations),
+                       unshifted.policy.learned_reward(observations, next_observations))  # fmt: skip
+
+
+def test_agent_reward_mean_shifts_the_rewards_the_value_learns_from(demos):
+    model = make_model(demos, agent_reward_mean=0.3).learn(16)
+    shift = model.reward_shift
+    model.train = lambda: None  # keep the discriminator and the shift as they were when the rollout was labelled
+    model.learn(16, reset_num_timesteps=False)  # inside the 200-step episode: no time-limit bootstrap
+    buffer = model.rollout_buffer
+    with th.no_grad():
+        rewards = model.policy.learned_reward(th.as_tensor(buffer.flat("observations")),
+                                              th.as_tensor(buffer.flat("next_observations")))  # fmt: skip
+    assert shift != 0.0
+    np.testing.assert_allclose(buffer.rewards.reshape(-1), rewards.numpy() + shift, rtol=1e-5, atol=1e-6)
+
+
 def test_temperature_decays_per_episode_to_its_floor(demos):
     model = make_model(demos, temperature_decay=0.5, min_temperature=0.3)
     assert model.temperature() == 1.0
