@@ -142,7 +142,7 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         question="the learned reward that trains the prior's Q shifted after every rollout so that the rollout's mean is "
         "0.2 (agent_reward_mean=0.2): staying up pays a little whatever the discriminator makes of the agent, where "
         "the logit's mean turns negative before every collapse and a constant bonus of 1 taught standing",
-        changes=dict(agent_reward_mean=0.2),
+        changes=dict(agent_reward_mean=0.2, policy_kwargs=dict(reward_offset=0.0)),  # Walker2d's entry sets an offset
     ),
     "discriminator-ensemble": dict(
         question="5 discriminators, the learned reward their mean logit less their standard deviation (the navigation "

@@ -129,8 +129,9 @@ class MPAIL(BaseAlgorithm):
         ``train/reward_shift`` and saved with the model). A constant added to every transition leaves the planner's
         choices within its horizon as they were, but where falls end episodes it decides whether staying up pays: as
         the discriminator learns to tell the agent's steps apart, their logit turns negative and falling looks best; a
-        small positive mean keeps staying up worth a little, whatever the discriminator makes of the agent. ``None``:
-        no shift (the paper's)
+        small positive mean keeps staying up worth a little, whatever the discriminator makes of the agent. The shift
+        takes the place of the policy's constant ``reward_offset``, which must then be 0. ``None``: no shift (the
+        paper's)
     :param stats_window_size: episodes averaged in the logged episode return
     :param tensorboard_log: tensorboard log folder
     :param policy_kwargs: keyword arguments of the policy (planner settings, ``dynamics``)
@@ -279,6 +280,13 @@ class MPAIL(BaseAlgorithm):
                 f"min_temperature ({self.min_temperature}) must not exceed initial_temperature ({self.initial_temperature}): "
                 "the temperature starts at initial_temperature and never goes below min_temperature, which would leave "
                 "initial_temperature unused."
+            )
+        reward_offset = (self.policy_kwargs or {}).get("reward_offset", 0.0)
+        if self.agent_reward_mean is not None and reward_offset != 0.0:
+            raise ValueError(
+                f"agent_reward_mean ({self.agent_reward_mean}) sets the learned reward's mean over each rollout, whatever "
+                f"constant is added to it, so policy_kwargs' reward_offset ({reward_offset}) would change nothing: set "
+                "one of them."
             )
 
     def _check_spaces(self) -> None:

@@ -220,6 +220,11 @@ def test_a_value_network_setting_with_the_policy_prior_is_refused_naming_it(valu
                    policy_prior=True, **value_setting)  # fmt: skip
 
 
+def test_a_reward_offset_with_an_agent_reward_mean_is_refused_naming_both():
+    with pytest.raises(ValueError, match=r"agent_reward_mean \(0.2\) sets .* reward_offset \(3.0\) would change nothing"):
+        MPAIL("MlpMPPI", "Pendulum-v1", agent_reward_mean=0.2, policy_kwargs=dict(reward_offset=3.0))
+
+
 def test_an_unknown_sampler_is_refused_naming_the_known_ones():
     with pytest.raises(ValueError, match=r"Unknown sampler 'uniform': expected one of \['delta', 'gaussian'\]"):
         MPAIL("MlpMPPI", "Pendulum-v1", policy_kwargs=dict(sampler="uniform"))
