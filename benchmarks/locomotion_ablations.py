@@ -27,7 +27,7 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 import torch as th
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
 from stable_baselines3.common.env_util import make_vec_env
 
 from benchmarks.report import (
@@ -144,6 +144,14 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         "the logit's mean turns negative before every collapse and a constant bonus of 1 taught standing",
         changes=dict(agent_reward_mean=0.2, policy_kwargs=dict(reward_offset=0.0)),  # Walker2d's entry sets an offset
     ),
+    "ensemble-reward-mean": dict(
+        question="both: 5 discriminators (mean less standard deviation) and the prior's reward shifted to a rollout mean "
+        "of 0.2: the best-scoring variant with the one that ends the training collapses",
+        changes=dict(
+            agent_reward_mean=0.2,
+            policy_kwargs=dict(reward_offset=0.0, discriminator_ensemble_size=5, discriminator_disagreement=1.0),
+        ),
+    ),
     "discriminator-ensemble": dict(
         question="5 discriminators, the learned reward their mean logit less their standard deviation (the navigation "
         "OOD lead: a reward that stops rising where the members disagree, beyond the demos' speeds)",
@@ -194,13 +202,23 @@ def results_dir_of(env_id: str, timesteps: int, results_dir: Path = RESULTS_DIR)
 
 
 def run_variant(
-    env_id: str, name: str, seed: int, timesteps: Optional[int], n_eval_episodes: int, out_dir: Path, command: str
+    env_id: str,
+    name: str,
+    seed: int,
+    timesteps: Optional[int],
+    n_eval_episodes: int,
+    out_dir: Path,
+    command: str,
+    checkpoint_every: int = 0,
 ) -> Path:
     """
     Trains one variant on one seed, evaluates it and writes its result and the trained model beside it (``.zip``; both
     skipped when the result exists).
 
     :param command: the command line that asked for it, quoted by the report
+    :param checkpoint_every: where positive, the model is also saved every this many env steps (in
+        ``<variant>_seed<N>_checkpoints/``) and each checkpoint scored as the final model is, to ``checkpoint_scores``:
+        does the score move along the run as much as the training episodes do?
 
     :return: the result file
     """
@@ -213,8 +231,12 @@ def run_variant(
     budget = budget if timesteps is None else timesteps
     model = MPAIL("MlpMPPI", make_vec_env(env_id, n_envs=n_envs, seed=seed), seed=seed, device="cpu", **settings)
     curve = TrainingCurve()
+    checkpoints_dir = Path(out_dir) / f"{name}_seed{seed}_checkpoints"
+    callbacks: List[BaseCallback] = [curve]
+    if checkpoint_every > 0:
+        callbacks.append(CheckpointCallback(max(checkpoint_every // n_envs, 1), str(checkpoints_dir), name_prefix="model"))
     started = time.perf_counter()
-    model.learn(budget, callback=curve)
+    model.learn(budget, callback=callbacks)
     train_seconds = time.perf_counter() - started
     model.save(path.with_suffix(".zip"))  # beside the result, for evaluations to come (not committed: *.zip is ignored)
     figures = evaluate_locomotion(model, env_id, n_eval_episodes, EVAL_SEED + seed, n_envs=n_eval_episodes)
@@ -228,9 +250,25 @@ def run_variant(
     result["deterministic_noise"] = DETERMINISTIC_NOISE  # how the evaluation's deterministic planning drew its samples
     result["training_curve"] = curve.points  # env steps, mean length and return of the last 100 episodes, learned reward
     result["settings"] = settings  # what the variant's name meant when it ran: the zoo entry may change later
+    if checkpoint_every > 0:
+        result["checkpoint_scores"] = checkpoint_scores(checkpoints_dir, env_id, n_eval_episodes, seed, reference)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(result, default=repr))
     return path
+
+
+def checkpoint_scores(
+    checkpoints_dir: Path, env_id: str, n_eval_episodes: int, seed: int, reference: Dict[str, Any]
+) -> List[List[float]]:
+    """Every checkpoint of a run scored as its final model is: env steps, normalised score, episode length, speed ratio."""
+    scores = []
+    for path in sorted(Path(checkpoints_dir).glob("model_*_steps.zip"), key=lambda path: int(path.stem.split("_")[1])):
+        figures = evaluate_locomotion(MPAIL.load(path, device="cpu"), env_id, n_eval_episodes, EVAL_SEED + seed,
+                                      n_envs=n_eval_episodes)  # fmt: skip
+        speed_ratio = figures["forward_speed"] / reference["expert_forward_speed"]
+        scores.append([int(path.stem.split("_")[1]), round(normalised_score(figures["return"], reference), 3),
+                       round(figures["length"], 1), round(speed_ratio, 3)])  # fmt: skip
+    return scores
 
 
 def grid_runs(results_dir: Path, pattern: str = "*_seed*.json") -> List[List[Dict[str, Any]]]:
@@ -279,6 +317,8 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     parser.add_argument("--timesteps", type=int, default=None, help="override the zoo entry's budget (a separate table)")
     parser.add_argument("--eval-episodes", type=int, default=10, help="deterministic evaluation episodes (default: 10)")
     parser.add_argument("--workers", type=int, default=1, help="runs trained at once, one torch thread each")
+    parser.add_argument("--checkpoint-every", type=int, default=0,
+                        help="also save and score the model every this many env steps (default: 0, never)")  # fmt: skip
     parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR)
     parser.add_argument("--report-only", action="store_true", help="only rewrite the section from stored results")
     args = parser.parse_args(argv)
@@ -290,8 +330,8 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
         print(f"{len(jobs)} runs to do", flush=True)
         with ProcessPoolExecutor(max(1, args.workers), mp_context=multiprocessing.get_context("spawn")) as pool:
             command = "python -m benchmarks.locomotion_ablations " + " ".join(argv if argv is not None else sys.argv[1:])
-            futures = [pool.submit(run_variant, args.env, name, seed, timesteps, args.eval_episodes, out_dir, command)
-                       for name, seed in jobs]  # fmt: skip
+            futures = [pool.submit(run_variant, args.env, name, seed, timesteps, args.eval_episodes, out_dir, command,
+                                   args.checkpoint_every) for name, seed in jobs]  # fmt: skip
             for future in futures:
                 print("wrote", future.result(), flush=True)
     th.set_num_threads(1)  # the runs' setting, quoted in the report

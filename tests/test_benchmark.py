@@ -188,14 +188,18 @@ def test_an_ablation_report_names_the_machine_its_runs_ran_on(tmp_path):
     assert "2 evaluation episodes per run, on machine A; machine B." in text
 
 
-def test_a_locomotion_ablation_run_records_its_training_curve(tmp_path):
+def test_a_locomotion_ablation_run_records_its_training_curve_and_scores_its_checkpoints(tmp_path):
     from benchmarks import locomotion_ablations
 
-    path = locomotion_ablations.run_variant("Hopper-v4", "defaults", 0, 1000, 1, tmp_path, "c")
-    curve = json.loads(path.read_text())["training_curve"]
+    path = locomotion_ablations.run_variant("Hopper-v4", "defaults", 0, 1000, 1, tmp_path, "c", checkpoint_every=500)
+    result = json.loads(path.read_text())
+    curve = result["training_curve"]
     assert [point[0] for point in curve] == [1000]  # one rollout of 4 envs x 250 steps
     steps, length, episode_return, learned_reward = curve[0]
     assert 0 < length <= 250 and np.isfinite(episode_return) and np.isfinite(learned_reward)
+    assert [point[0] for point in result["checkpoint_scores"]] == [500, 1000]
+    for _, score, length, speed_ratio in result["checkpoint_scores"]:
+        assert np.isfinite(score) and 0 < length <= 1000 and np.isfinite(speed_ratio)
 
 
 def test_a_scenario_seed_that_already_ran_with_the_same_settings_is_read_back_not_retrained(tmp_path, monkeypatch):
