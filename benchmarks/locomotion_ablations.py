@@ -278,6 +278,19 @@ def grid_runs(results_dir: Path, pattern: str = "*_seed*.json") -> List[List[Dic
     return [runs for runs in grids if runs]
 
 
+def checkpoint_lines(runs: List[Dict[str, Any]]) -> List[str]:
+    """The scores of the runs that kept checkpoints (``--checkpoint-every``), along each run, then the final model's."""
+    along = [run for run in runs if run.get("checkpoint_scores")]
+    if not along:
+        return []
+    lines = ["", "Scores along a run (each checkpoint is the model as it collected that env step, before that rollout's "
+             "update, scored as the final model is):", ""]  # fmt: skip
+    for run in sorted(along, key=lambda run: (run["variant"], run["seed"])):
+        scores = ", ".join(f"{steps // 1000}k {score:.2f}" for steps, score, _, _ in run["checkpoint_scores"])
+        lines.append(f"- `{run['variant']}` seed {run['seed']}: {scores}; final {run['score']:.2f}")
+    return lines
+
+
 def report(results_dir: Path) -> str:
     """The ``locomotion-ablations`` section: per task, budget and variant, means and 95% CIs over its seeds."""
     lines = [
@@ -303,6 +316,7 @@ def report(results_dir: Path) -> str:
             same_noise = sum(run.get("deterministic_noise") != DETERMINISTIC_NOISE for run in mine)
             seeds = f"{len(mine)}" + (f" ({same_noise} †)" if same_noise else "")
             lines.append(f"| `{name}` | {VARIANTS[name]['question']} | {seeds} | " + " | ".join(cells) + " |")
+        lines += checkpoint_lines(runs)
     lines += ["", "Each run on one torch thread. †: runs evaluated by a version whose deterministic planning drew the same "
               "samples at every step, a worse planner (the lap scenario went 4.5 m off its path with it, 0.46 m "
               "without); their models were not kept, so they stand until trained again."]  # fmt: skip

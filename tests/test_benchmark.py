@@ -188,6 +188,21 @@ def test_an_ablation_report_names_the_machine_its_runs_ran_on(tmp_path):
     assert "2 evaluation episodes per run, on machine A; machine B." in text
 
 
+def test_an_ablation_report_lists_the_scores_along_a_run_that_kept_checkpoints(tmp_path):
+    from benchmarks import locomotion_ablations
+
+    grid = tmp_path / "Hopper-v4_100steps"
+    grid.mkdir()
+    for seed, checkpoints in enumerate([[[50_000, 0.25, 300.0, 1.1], [100_000, 0.5, 500.0, 1.2]], None]):
+        run = dict(env_id="Hopper-v4", variant="defaults", seed=seed, timesteps=100, n_eval_episodes=2, command="c",
+                   train_seconds=1.0, score=0.75, speed_ratio=0.2, length=30.0, machine="m", checkpoint_scores=checkpoints,
+                   **{"return": 5.0})  # fmt: skip
+        (grid / f"defaults_seed{seed}.json").write_text(json.dumps(run))
+    text = locomotion_ablations.report(tmp_path)
+    assert "- `defaults` seed 0: 50k 0.25, 100k 0.50; final 0.75" in text
+    assert "seed 1:" not in text
+
+
 def test_a_locomotion_ablation_run_records_its_training_curve_and_scores_its_checkpoints(tmp_path):
     from benchmarks import locomotion_ablations
 
