@@ -231,7 +231,7 @@ def run_variant(
     budget = budget if timesteps is None else timesteps
     model = MPAIL("MlpMPPI", make_vec_env(env_id, n_envs=n_envs, seed=seed), seed=seed, device="cpu", **settings)
     curve = TrainingCurve()
-    checkpoints_dir = Path(out_dir) / f"{name}_seed{seed}_checkpoints"
+    checkpoints_dir = checkpoints_dir_of(out_dir, name, seed)
     callbacks: List[BaseCallback] = [curve]
     if checkpoint_every > 0:
         callbacks.append(CheckpointCallback(max(checkpoint_every // n_envs, 1), str(checkpoints_dir), name_prefix="model"))
@@ -257,18 +257,30 @@ def run_variant(
     return path
 
 
+def checkpoints_dir_of(out_dir: Path, name: str, seed: int) -> Path:
+    """Where a run with ``checkpoint_every`` keeps its checkpoints."""
+    return Path(out_dir) / f"{name}_seed{seed}_checkpoints"
+
+
+def checkpoint_file(checkpoints_dir: Path, steps: int) -> Path:
+    """The model as it collected env step ``steps`` (SB3's ``CheckpointCallback`` names it so)."""
+    return Path(checkpoints_dir) / f"model_{steps}_steps.zip"
+
+
+def score_model(model: MPAIL, env_id: str, n_eval_episodes: int, seed: int, reference: Dict[str, Any]) -> List[float]:
+    """A model scored as a run's final one is: normalised score, mean episode length, speed / the expert's."""
+    figures = evaluate_locomotion(model, env_id, n_eval_episodes, EVAL_SEED + seed, n_envs=n_eval_episodes)
+    speed_ratio = figures["forward_speed"] / reference["expert_forward_speed"]
+    return [round(normalised_score(figures["return"], reference), 3), round(figures["length"], 1), round(speed_ratio, 3)]
+
+
 def checkpoint_scores(
     checkpoints_dir: Path, env_id: str, n_eval_episodes: int, seed: int, reference: Dict[str, Any]
 ) -> List[List[float]]:
-    """Every checkpoint of a run scored as its final model is: env steps, normalised score, episode length, speed ratio."""
-    scores = []
-    for path in sorted(Path(checkpoints_dir).glob("model_*_steps.zip"), key=lambda path: int(path.stem.split("_")[1])):
-        figures = evaluate_locomotion(MPAIL.load(path, device="cpu"), env_id, n_eval_episodes, EVAL_SEED + seed,
-                                      n_envs=n_eval_episodes)  # fmt: skip
-        speed_ratio = figures["forward_speed"] / reference["expert_forward_speed"]
-        scores.append([int(path.stem.split("_")[1]), round(normalised_score(figures["return"], reference), 3),
-                       round(figures["length"], 1), round(speed_ratio, 3)])  # fmt: skip
-    return scores
+    """Every checkpoint of a run scored as its final model is: env steps, then :func:`score_model`'s figures."""
+    steps = sorted(int(path.stem.split("_")[1]) for path in Path(checkpoints_dir).glob("model_*_steps.zip"))
+    return [[step, *score_model(MPAIL.load(checkpoint_file(checkpoints_dir, step), device="cpu"), env_id, n_eval_episodes,
+                                seed, reference)] for step in steps]  # fmt: skip
 
 
 def grid_runs(results_dir: Path, pattern: str = "*_seed*.json") -> List[List[Dict[str, Any]]]:

@@ -394,3 +394,24 @@ def test_the_simulator_player_plans_through_mujoco_and_the_actor_player_without_
     assert isinstance(locomotion_diagnosis.player_of(model, "Hopper-v4", "actor"), locomotion_diagnosis.PriorActor)
     simulated = locomotion_diagnosis.player_of(model, "Hopper-v4", "simulator")
     assert isinstance(simulated.policy.planner.dynamics, locomotion_diagnosis.SimulatorDynamics)
+
+
+def test_locomotion_swaps_score_each_checkpoint_with_each_component_of_the_other_and_resume(tmp_path):
+    from benchmarks import locomotion_ablations, locomotion_swaps
+
+    grid = tmp_path / "Hopper-v4_2000steps"
+    locomotion_ablations.run_variant("Hopper-v4", "defaults", 0, 2000, 1, grid, "c", checkpoint_every=1000)
+    checkpoints = locomotion_ablations.checkpoints_dir_of(grid, "defaults", 0)
+    late, early = (MPAIL.load(locomotion_ablations.checkpoint_file(checkpoints, steps)) for steps in (2000, 1000))  # either side of an update
+    locomotion_swaps.swap_component(late, early, "discriminator")
+    swapped, kept = late.policy.discriminator.state_dict(), late.policy.dynamics.state_dict()
+    assert all(th.equal(swapped[key], value) for key, value in early.policy.discriminator.state_dict().items())
+    assert not all(th.equal(kept[key], value) for key, value in early.policy.dynamics.state_dict().items())
+
+    path = locomotion_swaps.swap_scores("Hopper-v4", "defaults", 0, (2000, 1000), 1, grid, "c")
+    rows = json.loads(path.read_text())
+    assert len(rows) == 2 * (1 + len(locomotion_swaps.COMPONENTS))
+    assert {(row["model"], row["donor"]) for row in rows if row["component"]} == {(2000, 1000), (1000, 2000)}
+    locomotion_swaps.swap_scores("Hopper-v4", "defaults", 0, (2000, 1000), 1, grid, "c")
+    assert json.loads(path.read_text()) == rows  # a rerun scores nothing again
+    assert "| 2k |" in locomotion_swaps.report(tmp_path)
