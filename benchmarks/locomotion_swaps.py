@@ -90,7 +90,7 @@ def report(results_dir: Path = RESULTS_DIR) -> str:
                   f"{first['n_eval_episodes']} evaluation episodes each, on {first['machine']}. Command: "
                   f"`{first['command']}`", "",
                   "| model | as it is | " + " | ".join(f"with the other's `{name}`" for name in COMPONENTS) + " |",
-                  "|---|---" * (len(COMPONENTS) + 1) + "|"]  # fmt: skip
+                  "|---" * (len(COMPONENTS) + 2) + "|"]  # fmt: skip
         for steps, row in own.items():
             swapped = {swap["component"]: swap for swap in rows if swap["model"] == steps and swap["component"]}
             cells = [f"{swapped[name]['score']:.2f} ({swapped[name]['length']:.0f})" if name in swapped else ""

@@ -402,7 +402,8 @@ def test_locomotion_swaps_score_each_checkpoint_with_each_component_of_the_other
     grid = tmp_path / "Hopper-v4_2000steps"
     locomotion_ablations.run_variant("Hopper-v4", "defaults", 0, 2000, 1, grid, "c", checkpoint_every=1000)
     checkpoints = locomotion_ablations.checkpoints_dir_of(grid, "defaults", 0)
-    late, early = (MPAIL.load(locomotion_ablations.checkpoint_file(checkpoints, steps)) for steps in (2000, 1000))  # either side of an update
+    # either side of the first rollout's update
+    late, early = (MPAIL.load(locomotion_ablations.checkpoint_file(checkpoints, steps)) for steps in (2000, 1000))
     locomotion_swaps.swap_component(late, early, "discriminator")
     swapped, kept = late.policy.discriminator.state_dict(), late.policy.dynamics.state_dict()
     assert all(th.equal(swapped[key], value) for key, value in early.policy.discriminator.state_dict().items())
@@ -414,4 +415,6 @@ def test_locomotion_swaps_score_each_checkpoint_with_each_component_of_the_other
     assert {(row["model"], row["donor"]) for row in rows if row["component"]} == {(2000, 1000), (1000, 2000)}
     locomotion_swaps.swap_scores("Hopper-v4", "defaults", 0, (2000, 1000), 1, grid, "c")
     assert json.loads(path.read_text()) == rows  # a rerun scores nothing again
-    assert "| 2k |" in locomotion_swaps.report(tmp_path)
+    table = [line for line in locomotion_swaps.report(tmp_path).splitlines() if line.startswith("|")]
+    assert len(table) == 4 and table[2].startswith("| 2k |")
+    assert len({line.count("|") for line in table}) == 1  # every row as wide as the header
