@@ -57,19 +57,20 @@ def swap_scores(
     done = {(row["model"], row["donor"], row["component"]) for row in rows}
     th.set_num_threads(1)
     for model_steps, donor_steps in ((steps[0], steps[1]), (steps[1], steps[0])):
+        donor = MPAIL.load(checkpoint_file(checkpoints_dir, donor_steps), device="cpu")  # read, never changed
         for component in (None, *COMPONENTS):
-            if (model_steps, donor_steps if component else None, component) in done:
+            key = (model_steps, donor_steps if component else None, component)
+            if key in done:
                 continue
             model = MPAIL.load(checkpoint_file(checkpoints_dir, model_steps), device="cpu")
             if component:
-                donor = MPAIL.load(checkpoint_file(checkpoints_dir, donor_steps), device="cpu")
                 swap_component(model, donor, component)
             score, length, _ = score_model(model, env_id, n_eval_episodes, seed, reference)
             rows.append(dict(env_id=env_id, variant=variant, seed=seed, model=model_steps, component=component,
-                             donor=donor_steps if component else None, score=score, length=length,
-                             n_eval_episodes=n_eval_episodes, command=command, machine=machine_description()))  # fmt: skip
+                             donor=key[1], score=score, length=length, n_eval_episodes=n_eval_episodes, command=command,
+                             machine=machine_description()))  # fmt: skip
             path.write_text(json.dumps(rows))
-            done.add((model_steps, donor_steps if component else None, component))
+            done.add(key)
     return path
 
 
