@@ -157,6 +157,16 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         "OOD lead: a reward that stops rising where the members disagree, beyond the demos' speeds)",
         changes=dict(policy_kwargs=dict(discriminator_ensemble_size=5, discriminator_disagreement=1.0)),
     ),
+    "ensemble-slow-value": dict(
+        question="5 discriminators (mean less standard deviation) and the planner's terminal value read from a slow "
+        "average of the prior's Q networks (value_tau=5e-5: a running mean over the first 20,000 updates, then a Polyak "
+        "average over about as many), where a rollout's update of the online Q swings the score",
+        changes=dict(
+            policy_kwargs=dict(
+                discriminator_ensemble_size=5, discriminator_disagreement=1.0, prior_kwargs=dict(value_tau=5e-5)
+            )
+        ),
+    ),
     "gradient-penalty": dict(
         question="a gradient penalty on the discriminator (weight 10, between expert and agent transitions) instead of "
         "spectral norm, as MPAIL2's critic bounds its slope",

@@ -6,7 +6,8 @@ the ensemble's mean ``Q(s_H, pi(s_H))`` replaces the on-policy ``V_phi`` as the 
 their optimisers are Stable-Baselines3's :class:`~stable_baselines3.sac.policies.SACPolicy`; the update is SAC's.
 """
 
-from typing import Any, Callable, Dict, List, Sequence
+import copy
+from typing import Any, Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 import torch as th
@@ -16,7 +17,15 @@ from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.sac.policies import SACPolicy
 from torch import nn
 
-from sb3_mpail.checks import FRACTION, HIDDEN_SIZES, POSITIVE_INTEGER, POSITIVE_NUMBER, UNIT_INTERVAL, check_arguments
+from sb3_mpail.checks import (
+    FRACTION,
+    HIDDEN_SIZES,
+    OPTIONAL_UNIT_INTERVAL,
+    POSITIVE_INTEGER,
+    POSITIVE_NUMBER,
+    UNIT_INTERVAL,
+    check_arguments,
+)
 
 #: what the prior's Q targets do where an episode terminated (see :class:`PriorReplay`)
 PRIOR_TERMINATIONS = ("cut", "bootstrap", "absorbing")
@@ -34,6 +43,10 @@ class PolicyPrior(nn.Module):
     :param learning_rate: Adam learning rate of actor, critics and entropy coefficient
     :param gamma: discount of the learned reward in the Q targets
     :param tau: Polyak coefficient of the target Q networks
+    :param value_tau: where set, the planner's terminal value reads a slow average of the Q networks instead of the
+        online ones: a running mean of every update's weights until ``1 / value_tau`` updates, then a Polyak average
+        with this coefficient. The online Q's landscape swings from one rollout to the next, and the planner follows it;
+        an average over many rollouts is steadier. ``None``: the online Q networks
     """
 
     def __init__(
@@ -45,6 +58,7 @@ class PolicyPrior(nn.Module):
         learning_rate: float = 3e-4,
         gamma: float = 0.99,
         tau: float = 0.005,
+        value_tau: Optional[float] = None,
     ):
         super().__init__()
         check_arguments(
@@ -53,6 +67,7 @@ class PolicyPrior(nn.Module):
             learning_rate=(learning_rate, POSITIVE_NUMBER),
             gamma=(gamma, FRACTION),
             tau=(tau, UNIT_INTERVAL),
+            value_tau=(value_tau, OPTIONAL_UNIT_INTERVAL),
         )
         self.sac = SACPolicy(
             observation_space,
@@ -69,6 +84,12 @@ class PolicyPrior(nn.Module):
         self.target_entropy = -float(np.prod(action_space.shape))
         self.gamma = gamma
         self.tau = tau
+        self.value_tau = value_tau
+        self.planning_critic = None
+        if value_tau is not None:
+            self.planning_critic = copy.deepcopy(self.sac.critic).requires_grad_(False)
+            del self.planning_critic.optimizer  # an average is never stepped; its optimiser's state would only be saved
+            self.register_buffer("planning_critic_updates", th.zeros((), dtype=th.long))
 
     def to_env_actions(self, unit_actions: th.Tensor) -> th.Tensor:
         """SAC's ``[-1, 1]`` actions in the env's units."""
@@ -114,10 +135,14 @@ class PolicyPrior(nn.Module):
         return th.stack(actions).view(horizon, n_envs, n_proposals, -1)
 
     def value(self, states: th.Tensor) -> th.Tensor:
-        """The ensemble's mean ``Q(s, tanh(mean of pi(s)))`` over any leading shape, ``(*leading)``."""
+        """
+        The ensemble's mean ``Q(s, tanh(mean of pi(s)))`` over any leading shape, ``(*leading)``; the Q networks are the
+        slow average where ``value_tau`` is set.
+        """
         flat = states.reshape(-1, states.shape[-1])
         mean, _, _ = self.sac.actor.get_action_dist_params(flat)
-        q_values = th.cat(self.sac.critic(flat, th.tanh(mean)), dim=1)
+        critic = self.sac.critic if self.planning_critic is None else self.planning_critic
+        q_values = th.cat(critic(flat, th.tanh(mean)), dim=1)
         return q_values.mean(dim=1).view(states.shape[:-1])
 
     def update(
@@ -162,6 +187,11 @@ class PolicyPrior(nn.Module):
         with th.no_grad():  # SB3's polyak_update without its per-call checks, which took 2 ms of it here (0.1-0.2 ms)
             for target, online in zip(critic_target.parameters(), critic.parameters()):
                 target.lerp_(online, self.tau)
+            if self.planning_critic is not None:
+                self.planning_critic_updates += 1
+                rate = max(self.value_tau, 1.0 / float(self.planning_critic_updates))
+                for average, online in zip(self.planning_critic.parameters(), critic.parameters()):
+                    average.lerp_(online, rate)
         return {
             "critic_loss": float(critic_loss.item()),
             "actor_loss": float(actor_loss.item()),

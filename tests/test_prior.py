@@ -26,8 +26,9 @@ def demos():
     return pendulum_trajectories()
 
 
-def prior_model(demos, **kwargs):
-    return make_model(demos, n_envs=2, policy_kwargs=dict(PRIOR_PLANNER), discriminator_update_interval=1, **kwargs)
+def prior_model(demos, value_tau=None, **kwargs):
+    planner = dict(PRIOR_PLANNER, prior_kwargs=dict(PRIOR_PLANNER["prior_kwargs"], value_tau=value_tau))
+    return make_model(demos, n_envs=2, policy_kwargs=planner, discriminator_update_interval=1, **kwargs)
 
 
 def test_the_priors_proposals_join_every_iterations_samples_inside_the_bounds(demos):
@@ -63,6 +64,24 @@ def test_sac_updates_fit_the_q_ensemble_to_the_learned_reward():
     assert (after - rewards).abs().mean() < 0.2 < (before - rewards).abs().mean()
 
 
+@pytest.mark.parametrize("value_tau, weights", [(0.01, (1 / 3, 1 / 3, 1 / 3)), (0.5, (0.25, 0.25, 0.5))])
+def test_a_slow_value_plans_with_the_running_mean_of_the_q_weights_then_their_polyak_average(value_tau, weights):
+    prior = PolicyPrior(spaces.Box(-1, 1, (2,)), spaces.Box(-1, 1, (1,)), net_arch=(8,), value_tau=value_tau)
+    generator = th.Generator().manual_seed(0)
+    states, actions = th.randn(16, 2, generator=generator), th.rand(16, 1, generator=generator) * 2 - 1
+    online = []
+    for _ in weights:
+        prior.update(states, actions, states, states[:, :1], th.ones(16, 1))
+        online.append([q.detach().clone() for q in prior.sac.critic.parameters()])
+    for average, *updates in zip(prior.planning_critic.parameters(), *online):
+        expected = sum(weight * update for weight, update in zip(weights, updates))
+        assert th.allclose(average, expected, atol=1e-6)
+    mean_actions = th.tanh(prior.sac.actor.get_action_dist_params(states)[0])
+    slow = th.cat(prior.planning_critic(states, mean_actions), dim=1).mean(dim=1)
+    assert th.allclose(prior.value(states), slow)
+    assert not th.allclose(slow, th.cat(prior.sac.critic(states, mean_actions), dim=1).mean(dim=1))
+
+
 def test_learning_with_a_prior_trains_it_off_policy_on_every_transition_and_not_the_on_policy_value(demos):
     model = prior_model(demos, prior_batch_size=8)
     prior = [p.detach().clone() for p in model.policy.prior.parameters()]
@@ -73,8 +92,9 @@ def test_learning_with_a_prior_trains_it_off_policy_on_every_transition_and_not_
     assert all(th.equal(before, after) for before, after in zip(value, model.policy.value_net.parameters()))
 
 
-def test_a_seeded_run_with_a_prior_is_reproducible_and_its_reloaded_copy_plans_the_same(demos, tmp_path):
-    first, second = (prior_model(demos, prior_batch_size=8).learn(48) for _ in range(2))
+@pytest.mark.parametrize("value_tau", [None, 0.1])
+def test_a_seeded_run_with_a_prior_is_reproducible_and_its_reloaded_copy_plans_the_same(demos, tmp_path, value_tau):
+    first, second = (prior_model(demos, value_tau, prior_batch_size=8).learn(48) for _ in range(2))
     observations = first.env.reset()
     actions = first.predict(observations, deterministic=True)[0]
     np.testing.assert_array_equal(actions, second.predict(observations, deterministic=True)[0])
@@ -139,6 +159,7 @@ def test_a_model_saved_with_the_former_boolean_termination_setting_loads_with_wh
     [
         (dict(prior_kwargs=dict(n_critics=0)), {}, "n_critics"),
         (dict(prior_kwargs=dict(tau=1.5)), {}, "tau"),
+        (dict(prior_kwargs=dict(value_tau=-0.1)), {}, "value_tau"),
         (dict(n_proposals=-1), {}, "n_proposals"),
         (dict(policy_prior="yes"), {}, "policy_prior"),
         ({}, dict(prior_updates_per_step=-1), "prior_updates_per_step"),
