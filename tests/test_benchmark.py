@@ -394,16 +394,17 @@ def test_the_simulator_player_plans_through_mujoco_and_the_actor_player_without_
     assert isinstance(simulated.policy.planner.dynamics, locomotion_diagnosis.SimulatorDynamics)
 
 
-def test_a_run_with_checkpoints_scores_them_and_swaps_score_each_with_each_component_of_the_other(tmp_path):
-    from benchmarks import locomotion_ablations, locomotion_swaps
+def test_a_run_with_checkpoints_scores_them_with_swapped_components_and_with_its_online_q(tmp_path):
+    from benchmarks import locomotion_ablations, locomotion_swaps, locomotion_value_source
 
     grid = tmp_path / "Hopper-v4_2000steps"
-    path = locomotion_ablations.run_variant("Hopper-v4", "defaults", 0, 2000, 1, grid, "c", checkpoint_every=1000)
+    variant = "ensemble-slow-value"  # its prior keeps a slow average of the Q networks for planning
+    path = locomotion_ablations.run_variant("Hopper-v4", variant, 0, 2000, 1, grid, "c", checkpoint_every=1000)
     scores = json.loads(path.read_text())["checkpoint_scores"]
     assert [point[0] for point in scores] == [1000, 2000]
     for _, score, length, speed_ratio in scores:
         assert np.isfinite(score) and 0 < length <= 1000 and np.isfinite(speed_ratio)
-    checkpoints = locomotion_ablations.checkpoints_dir_of(grid, "defaults", 0)
+    checkpoints = locomotion_ablations.checkpoints_dir_of(grid, variant, 0)
     # either side of the first rollout's update
     late, early = (MPAIL.load(locomotion_ablations.checkpoint_file(checkpoints, steps)) for steps in (2000, 1000))
     locomotion_swaps.swap_component(late, early, "discriminator")
@@ -411,12 +412,33 @@ def test_a_run_with_checkpoints_scores_them_and_swaps_score_each_with_each_compo
     assert all(th.equal(swapped[key], value) for key, value in early.policy.discriminator.state_dict().items())
     assert not all(th.equal(kept[key], value) for key, value in early.policy.dynamics.state_dict().items())
 
-    path = locomotion_swaps.swap_scores("Hopper-v4", "defaults", 0, (2000, 1000), 1, grid, "c")
+    path = locomotion_swaps.swap_scores("Hopper-v4", variant, 0, (2000, 1000), 1, grid, "c")
     rows = json.loads(path.read_text())
     assert len(rows) == 2 * (1 + len(locomotion_swaps.COMPONENTS))
     assert {(row["model"], row["donor"]) for row in rows if row["component"]} == {(2000, 1000), (1000, 2000)}
-    locomotion_swaps.swap_scores("Hopper-v4", "defaults", 0, (2000, 1000), 1, grid, "c")
+    locomotion_swaps.swap_scores("Hopper-v4", variant, 0, (2000, 1000), 1, grid, "c")
     assert json.loads(path.read_text()) == rows  # a rerun scores nothing again
     table = [line for line in locomotion_swaps.report(tmp_path).splitlines() if line.startswith("|")]
     assert len(table) == 4 and table[2].startswith("| 2k |")
     assert len({line.count("|") for line in table}) == 1  # every row as wide as the header
+
+    path = locomotion_value_source.online_value_scores("Hopper-v4", variant, 0, 1, grid, "c")
+    online = json.loads(path.read_text())
+    assert set(online) == {"final", "1000", "2000"}
+    locomotion_value_source.online_value_scores("Hopper-v4", variant, 0, 1, grid, "c")
+    assert json.loads(path.read_text()) == online  # a rerun scores nothing again
+    table = [line for line in locomotion_value_source.report(tmp_path).splitlines() if line.startswith("|")]
+    assert len(table) == 3 and len({line.count("|") for line in table}) == 1
+    assert table[0] == "| final | 1k | 2k |"
+    planned = locomotion_value_source.plan_with_online_q(late).policy.prior
+    assert all(th.equal(online_q, averaged) for online_q, averaged in zip(planned.sac.critic.parameters(),
+                                                                          planned.planning_critic.parameters()))  # fmt: skip
+
+
+def test_planning_with_the_online_q_is_refused_for_a_prior_without_a_slow_average():
+    from benchmarks import locomotion_value_source
+
+    planner = dict(dynamics="learned", n_samples=4, horizon=2, n_iterations=1, policy_prior=True, n_proposals=2)
+    model = MPAIL("MlpMPPI", "Hopper-v4", demos="hopper_16", n_steps=8, seed=0, device="cpu", policy_kwargs=planner)
+    with pytest.raises(ValueError, match="value_tau"):
+        locomotion_value_source.plan_with_online_q(model)
