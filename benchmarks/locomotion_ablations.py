@@ -293,6 +293,20 @@ def checkpoint_scores(
                                 seed, reference)] for step in steps]  # fmt: skip
 
 
+def training_collapsed(curve: List[List[float]], min_peak: float = 100.0, fraction: float = 0.2) -> bool:
+    """
+    Whether a run's training episodes collapsed: their mean length (:class:`TrainingCurve`'s second figure), once past
+    ``min_peak`` steps, later fell below ``fraction`` of the longest it had reached (the agent learned to stand or hop,
+    then to fall at once).
+    """
+    peak = 0.0
+    for _, length, *_ in curve:
+        peak = max(peak, length)
+        if peak > min_peak and length < fraction * peak:
+            return True
+    return False
+
+
 def grid_runs(results_dir: Path, pattern: str = "*_seed*.json") -> List[List[Dict[str, Any]]]:
     """The stored results of each ``<task>_<steps>steps`` grid under ``results_dir`` that holds any, grid by grid."""
     grids = [[json.loads(path.read_text()) for path in sorted(grid.glob(pattern))]
@@ -328,19 +342,23 @@ def report(results_dir: Path) -> str:
                   f"{runs[0]['n_eval_episodes']} evaluation episodes per run, on {machines_of(runs)}. Commands: "
                   + "; ".join(f"`{command}`" for command in commands), "",
                   "| variant | what changes | seeds | score | return | forward speed / expert's | episode length | "
-                  "training seconds |", "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+                  "training seconds | training collapses |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
         for name in VARIANTS:
             mine = [run for run in runs if run["variant"] == name]
             if not mine:
                 continue
             cells = [format_ci(*mean_ci([run[key] for run in mine])) for key in ("score", "return", "speed_ratio", "length")]
             cells.append(f"{sum(run['train_seconds'] for run in mine) / len(mine):.0f}")
+            curves = [run["training_curve"] for run in mine if run.get("training_curve")]
+            cells.append(f"{sum(map(training_collapsed, curves))} of {len(curves)}" if curves else "")
             same_noise = sum(run.get("deterministic_noise") != DETERMINISTIC_NOISE for run in mine)
             seeds = f"{len(mine)}" + (f" ({same_noise} †)" if same_noise else "")
             lines.append(f"| `{name}` | {VARIANTS[name]['question']} | {seeds} | " + " | ".join(cells) + " |")
         lines += checkpoint_lines(runs)
-    lines += ["", "Each run on one torch thread. †: runs evaluated by a version whose deterministic planning drew the same "
-              "samples at every step, a worse planner (the lap scenario went 4.5 m off its path with it, 0.46 m "
+    lines += ["", "Each run on one torch thread. Training collapses: the runs whose mean training episode length (over "
+              "the last 100 episodes, at each rollout's end), once past 100 steps, fell below a fifth of its peak; "
+              "blank for runs that recorded no curve. †: runs evaluated by a version whose deterministic planning drew "
+              "the same samples at every step, a worse planner (the lap scenario went 4.5 m off its path with it, 0.46 m "
               "without); their models were not kept, so they stand until trained again."]  # fmt: skip
     return "\n".join(lines)
 

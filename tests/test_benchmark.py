@@ -201,6 +201,19 @@ def test_an_ablation_report_lists_the_scores_along_a_run_that_kept_checkpoints(t
     text = locomotion_ablations.report(tmp_path)
     assert "- `defaults` seed 0: 50k 0.25, 100k 0.50; final 0.75" in text
     assert "seed 1:" not in text
+    header, row = (next(line for line in text.splitlines() if line.startswith(start)) for start in ("| variant", "| `"))
+    assert row.endswith("|  |") and row.count("|") == header.count("|")  # no curves recorded: the collapses cell is blank
+
+
+@pytest.mark.parametrize(
+    "lengths, collapsed",
+    [([50, 300, 500, 90], True), ([50, 300, 500, 110], False), ([20, 80, 10], False), ([50, 300, 40, 400], True)],
+)
+def test_a_training_collapses_when_its_episodes_fall_below_a_fifth_of_their_peak_past_100_steps(lengths, collapsed):
+    from benchmarks import locomotion_ablations
+
+    curve = [[1000 * (index + 1), length, 0.0, 0.0] for index, length in enumerate(lengths)]
+    assert locomotion_ablations.training_collapsed(curve) is collapsed
 
 
 def test_a_locomotion_ablation_run_records_its_training_curve(tmp_path):
