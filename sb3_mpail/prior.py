@@ -45,8 +45,9 @@ class PolicyPrior(nn.Module):
     :param tau: Polyak coefficient of the target Q networks
     :param value_tau: where set, the planner's terminal value reads a slow average of the Q networks instead of the
         online ones: a running mean of every update's weights until ``1 / value_tau`` updates, then a Polyak average
-        with this coefficient. The online Q's landscape swings from one rollout to the next, and the planner follows it;
-        an average over many rollouts is steadier. ``None``: the online Q networks
+        with this coefficient (0: the running mean throughout). Meant to steady a value whose landscape swings from one
+        rollout to the next; on Hopper an average over some 40k env steps lowered the score instead
+        (docs/learned-models.md). ``None``: the online Q networks
     """
 
     def __init__(
