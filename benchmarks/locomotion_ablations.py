@@ -207,8 +207,30 @@ def variant_settings(env_id: str, name: str) -> Dict[str, Any]:
     return settings
 
 
-def results_dir_of(env_id: str, timesteps: int, results_dir: Path = RESULTS_DIR) -> Path:
-    return Path(results_dir) / f"{env_id.split('/')[-1]}_{timesteps}steps"
+def grid_dir(env_id: str, timesteps: Optional[int], results_dir: Path = RESULTS_DIR) -> Path:
+    """The task's results at ``timesteps`` env steps, or at its zoo entry's budget where ``timesteps`` is None."""
+    budget = timesteps or int(zoo_hyperparameters(env_id)["n_timesteps"])
+    return Path(results_dir) / f"{env_id.split('/')[-1]}_{budget}steps"
+
+
+def stored_run(results_dir: Path, name: str, seed: int) -> Dict[str, Any]:
+    """The stored result of one run of a grid (what :func:`run_variant` wrote)."""
+    return json.loads((Path(results_dir) / f"{name}_seed{seed}.json").read_text())
+
+
+def demos_reference(settings: Dict[str, Any]) -> Dict[str, Any]:
+    """The information file (expert's and random returns and speeds) of the shipped demo family a run trained on."""
+    return shipped_demo_info(settings["demos"].rsplit("_", 1)[0])
+
+
+def add_grid_arguments(parser: argparse.ArgumentParser, variant: str) -> None:
+    """The options of a tool that reads one variant's stored runs of a task's grid."""
+    parser.add_argument("--env", default="Hopper-v4")
+    parser.add_argument("--variant", default=variant)
+    parser.add_argument("--timesteps", type=int, default=None, help="the runs' budget (default: the zoo entry's)")
+    parser.add_argument("--eval-episodes", type=int, default=10)
+    parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR)
+    parser.add_argument("--report-only", action="store_true", help="only rewrite the section from stored results")
 
 
 def run_variant(
@@ -250,7 +272,7 @@ def run_variant(
     train_seconds = time.perf_counter() - started
     model.save(path.with_suffix(".zip"))  # beside the result, for evaluations to come (not committed: *.zip is ignored)
     figures = evaluate_locomotion(model, env_id, n_eval_episodes, EVAL_SEED + seed, n_envs=n_eval_episodes)
-    reference = shipped_demo_info(settings["demos"].rsplit("_", 1)[0])
+    reference = demos_reference(settings)
     result = dict(
         env_id=env_id, variant=name, seed=seed, timesteps=budget, n_envs=n_envs, train_seconds=round(train_seconds, 1),
         n_eval_episodes=n_eval_episodes, command=command, machine=machine_description(),
@@ -377,14 +399,13 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     parser.add_argument("--report-only", action="store_true", help="only rewrite the section from stored results")
     args = parser.parse_args(argv)
     if not args.report_only:
-        timesteps = args.timesteps or int(zoo_hyperparameters(args.env)["n_timesteps"])
-        out_dir = results_dir_of(args.env, timesteps, args.results_dir)
+        out_dir = grid_dir(args.env, args.timesteps, args.results_dir)
         jobs: List[tuple] = [(name, seed) for name in args.variants for seed in args.seeds
                              if not (out_dir / f"{name}_seed{seed}.json").exists()]  # fmt: skip
         print(f"{len(jobs)} runs to do", flush=True)
         with ProcessPoolExecutor(max(1, args.workers), mp_context=multiprocessing.get_context("spawn")) as pool:
             command = "python -m benchmarks.locomotion_ablations " + " ".join(argv if argv is not None else sys.argv[1:])
-            futures = [pool.submit(run_variant, args.env, name, seed, timesteps, args.eval_episodes, out_dir, command,
+            futures = [pool.submit(run_variant, args.env, name, seed, args.timesteps, args.eval_episodes, out_dir, command,
                                    args.checkpoint_every) for name, seed in jobs]  # fmt: skip
             for future in futures:
                 print("wrote", future.result(), flush=True)

@@ -27,11 +27,9 @@ import torch as th
 from torch import nn
 
 from benchmarks import locomotion_ablations
-from benchmarks.locomotion_ablations import EVAL_SEED, grid_runs, results_dir_of
+from benchmarks.locomotion_ablations import EVAL_SEED, demos_reference, grid_dir, grid_runs, stored_run
 from benchmarks.report import commands_of, format_ci, machine_description, machines_of, mean_ci, write_section
-from benchmarks.scenarios import zoo_hyperparameters
 from sb3_mpail import MPAIL
-from sb3_mpail.demos import shipped_demo_info
 from sb3_mpail.envs.locomotion import evaluate_locomotion
 from sb3_mpail.evaluation import normalised_score
 
@@ -113,11 +111,11 @@ def diagnose(
     if path.exists():
         return path
     th.set_num_threads(1)
-    trained = json.loads((Path(ablations_dir) / f"{variant}_seed{seed}.json").read_text())
+    trained = stored_run(ablations_dir, variant, seed)
     model = MPAIL.load(Path(ablations_dir) / f"{variant}_seed{seed}.zip", device="cpu")
     started = time.perf_counter()
     figures = evaluate_locomotion(player_of(model, env_id, player), env_id, n_episodes, EVAL_SEED + seed, n_envs=n_episodes)
-    reference = shipped_demo_info(trained["settings"]["demos"].rsplit("_", 1)[0])
+    reference = demos_reference(trained["settings"])
     result = dict(
         env_id=env_id, variant=variant, seed=seed, player=player, timesteps=trained["timesteps"], n_episodes=n_episodes,
         seconds=round(time.perf_counter() - started, 1), command=command, machine=machine_description(),
@@ -167,9 +165,8 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     parser.add_argument("--report-only", action="store_true", help="only rewrite the section from stored results")
     args = parser.parse_args(argv)
     if not args.report_only:
-        timesteps = args.timesteps or int(zoo_hyperparameters(args.env)["n_timesteps"])
-        ablations_dir = results_dir_of(args.env, timesteps, locomotion_ablations.RESULTS_DIR)
-        out_dir = results_dir_of(args.env, timesteps, RESULTS_DIR)
+        ablations_dir = grid_dir(args.env, args.timesteps, locomotion_ablations.RESULTS_DIR)
+        out_dir = grid_dir(args.env, args.timesteps, RESULTS_DIR)
         command = "python -m benchmarks.locomotion_diagnosis " + " ".join(argv if argv is not None else sys.argv[1:])
         for seed, player in [(seed, player) for seed in args.seeds for player in args.players]:
             path = diagnose(args.env, args.variant, seed, player, args.episodes, ablations_dir, out_dir, command)

@@ -20,11 +20,18 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import torch as th
 
-from benchmarks.locomotion_ablations import RESULTS_DIR, checkpoint_file, checkpoints_dir_of, results_dir_of, score_model
+from benchmarks.locomotion_ablations import (
+    RESULTS_DIR,
+    add_grid_arguments,
+    checkpoint_file,
+    checkpoints_dir_of,
+    demos_reference,
+    grid_dir,
+    score_model,
+    stored_run,
+)
 from benchmarks.report import machine_description, write_section
-from benchmarks.scenarios import zoo_hyperparameters
 from sb3_mpail import MPAIL
-from sb3_mpail.demos import shipped_demo_info
 
 #: the parts of ``MPAIL.policy`` swapped, by their names in it: modules, or the planner's temperature (a buffer)
 COMPONENTS = ("discriminator", "dynamics", "prior.sac.actor", "prior.sac.critic", "temperature")
@@ -46,11 +53,10 @@ def swap_scores(
     Scores both checkpoints of the pair as they are, then each with every one of the other's :data:`COMPONENTS`.
 
     :param steps: the two checkpoints' env steps
-    :param results_dir: the ablation results of the task and budget (``results_dir_of``)
+    :param results_dir: the ablation results of the task and budget (``grid_dir``)
     :return: the swaps file of the run
     """
-    run = json.loads((Path(results_dir) / f"{variant}_seed{seed}.json").read_text())
-    reference = shipped_demo_info(run["settings"]["demos"].rsplit("_", 1)[0])
+    reference = demos_reference(stored_run(results_dir, variant, seed)["settings"])
     checkpoints_dir = checkpoints_dir_of(results_dir, variant, seed)
     path = checkpoints_dir / "swaps.json"
     rows: List[Dict[str, Any]] = json.loads(path.read_text()) if path.exists() else []
@@ -102,20 +108,14 @@ def report(results_dir: Path = RESULTS_DIR) -> str:
 
 def main(argv: Optional[Sequence[str]] = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--env", default="Hopper-v4")
-    parser.add_argument("--variant", default="ensemble-reward-mean")
+    add_grid_arguments(parser, variant="ensemble-reward-mean")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--steps", type=int, nargs=2, default=[150_000, 125_000], help="the two checkpoints' env steps")
-    parser.add_argument("--timesteps", type=int, default=None, help="the run's budget (default: the zoo entry's)")
-    parser.add_argument("--eval-episodes", type=int, default=10)
-    parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR)
-    parser.add_argument("--report-only", action="store_true", help="only rewrite the section from stored results")
     args = parser.parse_args(argv)
     if not args.report_only:
-        timesteps = args.timesteps or int(zoo_hyperparameters(args.env)["n_timesteps"])
         command = "python -m benchmarks.locomotion_swaps " + " ".join(argv if argv is not None else sys.argv[1:])
         path = swap_scores(args.env, args.variant, args.seed, args.steps, args.eval_episodes,
-                           results_dir_of(args.env, timesteps, args.results_dir), command)  # fmt: skip
+                           grid_dir(args.env, args.timesteps, args.results_dir), command)  # fmt: skip
         print("wrote", path, flush=True)
     write_section("locomotion-swaps", report(args.results_dir))
 

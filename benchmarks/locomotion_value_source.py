@@ -21,11 +21,18 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import torch as th
 
-from benchmarks.locomotion_ablations import RESULTS_DIR, checkpoint_file, checkpoints_dir_of, results_dir_of, score_model
+from benchmarks.locomotion_ablations import (
+    RESULTS_DIR,
+    add_grid_arguments,
+    checkpoint_file,
+    checkpoints_dir_of,
+    demos_reference,
+    grid_dir,
+    score_model,
+    stored_run,
+)
 from benchmarks.report import format_ci, machine_description, mean_ci, write_section
-from benchmarks.scenarios import zoo_hyperparameters
 from sb3_mpail import MPAIL
-from sb3_mpail.demos import shipped_demo_info
 
 #: the final model's key in a run's ``value_source.json`` (checkpoints are keyed by their env steps)
 FINAL = "final"
@@ -46,11 +53,11 @@ def online_value_scores(
     """
     Scores the run's final model and each of its checkpoints planning with the online Q networks.
 
-    :param results_dir: the ablation results of the task and budget (``results_dir_of``)
+    :param results_dir: the ablation results of the task and budget (``grid_dir``)
     :return: the run's ``value_source.json``
     """
-    run = json.loads((Path(results_dir) / f"{variant}_seed{seed}.json").read_text())
-    reference = shipped_demo_info(run["settings"]["demos"].rsplit("_", 1)[0])
+    run = stored_run(results_dir, variant, seed)
+    reference = demos_reference(run["settings"])
     checkpoints_dir = checkpoints_dir_of(results_dir, variant, seed)
     path = checkpoints_dir / "value_source.json"
     rows: Dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
@@ -106,20 +113,14 @@ def report(results_dir: Path = RESULTS_DIR) -> str:
 
 def main(argv: Optional[Sequence[str]] = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--env", default="Hopper-v4")
-    parser.add_argument("--variant", default="ensemble-slow-value")
+    add_grid_arguments(parser, variant="ensemble-slow-value")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
-    parser.add_argument("--timesteps", type=int, default=None, help="the runs' budget (default: the zoo entry's)")
-    parser.add_argument("--eval-episodes", type=int, default=10)
-    parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR)
-    parser.add_argument("--report-only", action="store_true", help="only rewrite the section from stored results")
     args = parser.parse_args(argv)
     if not args.report_only:
-        timesteps = args.timesteps or int(zoo_hyperparameters(args.env)["n_timesteps"])
         command = "python -m benchmarks.locomotion_value_source " + " ".join(argv if argv is not None else sys.argv[1:])
         for seed in args.seeds:
             path = online_value_scores(args.env, args.variant, seed, args.eval_episodes,
-                                       results_dir_of(args.env, timesteps, args.results_dir), command)  # fmt: skip
+                                       grid_dir(args.env, args.timesteps, args.results_dir), command)  # fmt: skip
             print("wrote", path, flush=True)
     write_section("locomotion-value-source", report(args.results_dir))
 
