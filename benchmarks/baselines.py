@@ -5,8 +5,8 @@ built on the ``imitation`` library and Stable-Baselines3:
 * ``mpail``: :class:`~sb3_mpail.MPAIL`.
 * ``mpail_om``: MPAIL-OM, :class:`~sb3_mpail.MPAIL` planning through a dynamics model learned online from its own
   transitions (``dynamics="learned"``), no prior model: as much information as GAIL has.
-* ``mpail_ensemble``: :class:`~sb3_mpail.MPAIL` whose cost is a discriminator ensemble's mean logit less its spread
-  (``discriminator_ensemble_size=5``, ``discriminator_disagreement=1``), its other settings ``mpail.yml``'s.
+* ``mpail_one_discriminator``: :class:`~sb3_mpail.MPAIL` with the paper's single discriminator where ``mpail.yml``
+  trains an ensemble (navigation), its other settings ``mpail.yml``'s.
 * ``gail``: imitation's GAIL, PPO generator, state-only discriminator ``d(s, s')`` (MPAIL's discriminator,
   :func:`~sb3_mpail.mppi.costs.make_transition_discriminator`; dummy zero actions in the demos, never read). With
   ``reward_net_kwargs`` ``features`` it sees only those features of the state, in any form MPAIL's
@@ -71,13 +71,13 @@ ACTION_DEMO_DIR = Path(__file__).resolve().parent / "action_demos"
 DEMO_SCRIPT_DIR = Path(__file__).resolve().parent.parent / "demos"
 
 #: MPAIL's variants: algorithms trained by :func:`train_mpail`, each with its own hyperparameter file
-MPAIL_VARIANTS: Tuple[str, ...] = ("mpail", "mpail_om", "mpail_ensemble")
+MPAIL_VARIANTS: Tuple[str, ...] = ("mpail", "mpail_om", "mpail_one_discriminator")
 ALGOS: Tuple[str, ...] = (*MPAIL_VARIANTS, "gail", "airl", "bc", "irl_mpc")
 #: names used in every table and figure
 ALGO_LABELS: Dict[str, str] = {
     "mpail": "MPAIL",
     "mpail_om": "MPAIL-OM (dynamics learned online)",
-    "mpail_ensemble": "MPAIL, 5-discriminator ensemble",
+    "mpail_one_discriminator": "MPAIL, one discriminator",
     "gail": "GAIL (state-only)",
     "airl": "AIRL (obs-only)",
     "bc": "BC (uses expert actions)",

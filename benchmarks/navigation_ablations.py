@@ -1,20 +1,20 @@
 """
 What makes MPAIL's navigation planner reach the goal from out-of-distribution starts: one training setting changed at
-a time around the main command's defaults, each over several seeds, each model measured in distribution and from
-the 40 x 40 m box of the paper's OOD test.
+a time around the main command's planner with one discriminator, each over several seeds, each model measured in
+distribution and from the 40 x 40 m box of the paper's OOD test.
 
-Every variant trains as ``python -m sb3_mpail.train_navigation`` does (its defaults, :func:`make_model`), with the
-changes listed in :data:`VARIANTS`, then is evaluated deterministically: in distribution on 50 episodes (score against
-the demos' own expert), and from 200 starts uniform in the 40 x 40 m box with uniform heading (the same starts for
-every variant and seed), measured as the grid runner measures every algorithm (:func:`benchmarks.runner.ood_measures`)
-plus the share of episodes that end circling (yaw rate above 2 rad/s over the last 50 steps). Results go to
-``benchmarks/results/navigation_ablations/<variant>_seed<N>.json`` (a rerun skips finished runs), the table to the
-``navigation-ablations`` section of BENCHMARKS.md.
+Every variant trains as ``python -m sb3_mpail.train_navigation`` does (its defaults, :func:`make_model`) with one
+discriminator (:data:`BASE_POLICY_KWARGS`) and the changes listed in :data:`VARIANTS`, then is evaluated
+deterministically: in distribution on 50 episodes (score against the demos' own expert), and from 200 starts uniform
+in the 40 x 40 m box with uniform heading (the same starts for every variant and seed), measured as the grid runner
+measures every algorithm (:func:`benchmarks.runner.ood_measures`) plus the share of episodes that end circling (yaw
+rate above 2 rad/s over the last 50 steps). Results go to ``benchmarks/results/navigation_ablations/<variant>_seed<N>.json``
+(a rerun skips finished runs), the table to the ``navigation-ablations`` section of BENCHMARKS.md.
 
 Usage::
 
     python -m benchmarks.navigation_ablations --seeds 0 1 2 --workers 2          # every variant
-    python -m benchmarks.navigation_ablations --variants defaults stopping-demos --seeds 0 1 2
+    python -m benchmarks.navigation_ablations --variants one-discriminator stopping-demos --seeds 0 1 2
     python -m benchmarks.navigation_ablations --report-only
     python -m benchmarks.navigation_ablations --variants concave-value --reevaluate   # saved models, evaluated again
 """
@@ -34,6 +34,7 @@ import torch as th
 
 from benchmarks.report import DETERMINISTIC_NOISE, SAME_NOISE, commands_of, machine_description, machines_of, write_section
 from benchmarks.runner import (
+    CIRCLING_AWAY,
     CIRCLING_YAW_RATE,
     GOAL_RADIUS,
     OOD_SEED,
@@ -74,7 +75,7 @@ N_ID_EPISODES, N_OOD_STARTS = 50, 200
 @dataclass(frozen=True)
 class Variant:
     """
-    One training setting against the defaults.
+    One training setting against the base (:data:`BASE_POLICY_KWARGS`).
 
     :param question: what the row tests, as the table says it
     :param policy_kwargs: planner settings replacing the main command's, built per run (modules are not shared)
@@ -105,9 +106,15 @@ def standardised_headings() -> Dict[str, Any]:
     return dict(discriminator_features=standardised, value_features=standardised)
 
 
+#: what every variant changes besides its own settings: the main command's planner with one discriminator, the
+#: defaults these rows were measured against before the ensemble became one
+BASE_POLICY_KWARGS: Dict[str, Any] = dict(discriminator_ensemble_size=1)
+
 #: every variant, by name
 VARIANTS: Dict[str, Variant] = {
-    "defaults": Variant("the main command's defaults"),
+    "one-discriminator": Variant(
+        "one discriminator: the main command's planner before its ensemble, and every other row's base"
+    ),
     "stopping-demos": Variant("demos of an expert that stops on the goal (navigation_4)", demos="navigation_4"),
     "gaussian-sampler": Variant(
         "Gaussian sampling (the paper's) instead of delta sampling",
@@ -160,7 +167,8 @@ VARIANTS: Dict[str, Variant] = {
                      value_disagreement=1.0),
     ),
     "discriminator-ensemble": Variant(
-        "5 discriminators, the cost their mean logit less their standard deviation (disagreement as an OOD penalty)",
+        "5 discriminators, the cost their mean logit less their standard deviation (disagreement as an OOD penalty): the "
+        "main command's defaults",
         lambda: dict(discriminator_ensemble_size=5, discriminator_disagreement=1.0),
     ),
     "discriminator-ensemble-mean": Variant(
@@ -256,7 +264,8 @@ def run_variant(
         return path
     th.set_num_threads(1)
     variant = VARIANTS[name]
-    model = make_model(variant.demos, n_envs=variant.n_envs, seed=seed, policy_kwargs=variant.policy_kwargs(),
+    model = make_model(variant.demos, n_envs=variant.n_envs, seed=seed,
+                       policy_kwargs={**BASE_POLICY_KWARGS, **variant.policy_kwargs()},
                        env_kwargs=variant.env_kwargs, **variant.algorithm_kwargs)  # fmt: skip
     started = time.perf_counter()
     model.learn(variant.timesteps)
@@ -314,12 +323,12 @@ def report(results_dir: Path, names: Sequence[str]) -> str:
     :param results_dir: where the results are
     :param names: the variants, in table order
     """
-    columns = ("id_score", "reached_reachable", "final_reward", "progress", "circling")
+    columns = ("id_score", "reached_reachable", "final_reward", "progress", "circling", "circling_away")
     ceiling = ood_measures(true_reward_record(N_OOD_STARTS, Path(results_dir).parent))
     header = [
         "| variant | what changes | seeds | in-distribution score | OOD: within 2 m, reachable starts | OOD: mean final "
-        "reward | OOD: mean progress | OOD: ends circling |",
-        "|---|---|---|---|---|---|---|---|",
+        f"reward | OOD: mean progress | OOD: ends circling | OOD: ... farther than {CIRCLING_AWAY:g} m from the goal |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     rows: Dict[bool, List[str]] = {True: [], False: []}
     every_run: List[Dict[str, Any]] = []
@@ -336,15 +345,16 @@ def report(results_dir: Path, names: Sequence[str]) -> str:
     lines = [
         "## Navigation ablations: what makes the planner generalise",
         "",
-        "Each variant changes one setting of the main command's defaults (`python -m sb3_mpail.train_navigation`: "
-        f"{DEFAULT_TIMESTEPS} env steps, {DEFAULT_N_ENVS} envs, demos `{DEFAULT_DEMOS}` unless a row says otherwise). "
+        "Each variant changes one setting of `one-discriminator`: the main command (`python -m sb3_mpail.train_navigation`: "
+        f"{DEFAULT_TIMESTEPS} env steps, {DEFAULT_N_ENVS} envs, demos `{DEFAULT_DEMOS}` unless a row says otherwise) "
+        "with one discriminator, its defaults before `discriminator-ensemble` became them. "
         f"In distribution: the deterministic planner's normalised score on {N_ID_EPISODES} episodes from the training "
         f"start region, against the demos' own expert. Out of distribution: {N_OOD_STARTS} deterministic 100-step "
         f"episodes from starts uniform in the 40 x 40 m box with uniform heading (seeds {OOD_SEED}+, the same starts "
         f"for every row); within {GOAL_RADIUS:g} m of the goal among the starts within 32 m (reachable at the 3 m/s "
         "top speed), mean final reward (sqrt(200) - final distance), mean progress ((start - final distance) / start "
         f"distance), share of episodes ending in a circle (yaw rate > {CIRCLING_YAW_RATE:g} rad/s over their last "
-        "half). Means ± 95% CI (Student's t) over seeds.",
+        f"half), anywhere and farther than {CIRCLING_AWAY:g} m from the goal. Means ± 95% CI (Student's t) over seeds.",
         "",
         *header,
         *rows[True],

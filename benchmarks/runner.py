@@ -60,6 +60,9 @@ GOAL_RADIUS = 2.0
 GOAL = np.array([10.0, 10.0])
 #: an OOD episode "ends circling" when its mean absolute yaw rate over its last half exceeds this (rad/s)
 CIRCLING_YAW_RATE = 2.0
+#: ... and "circles away from the goal" when it also ends farther than this from it (metres; the expert circles the
+#: goal at about 0.6 m)
+CIRCLING_AWAY = 5.0
 #: the farthest a car drives in a 100-step episode at its 3 m/s top speed (metres)
 MAX_TRAVEL = MAX_SPEED * DT * 100
 NAVIGATION = "sb3_mpail/Navigation-v0"
@@ -316,6 +319,56 @@ def load_results(results_dir: Path, name: str) -> List[Dict[str, Any]]:
     return [json.loads(path.read_text()) for path in sorted((Path(results_dir) / name).glob("*.json"))]
 
 
+#: marks the rows with runs trained under other hyperparameters than their algorithm's file holds now
+EARLIER_SETTINGS_NOTE = (
+    "‡: runs trained with an earlier entry of their algorithm's hyperparameter file than it holds now (their stored "
+    "`hyperparams` differ); the runner skips finished runs, so delete their result files to train them again."
+)
+
+
+def comparable_settings(hyperparams: Dict[str, Any]) -> Dict[str, Any]:
+    """Hyperparameters as a result file stores them, less the demo set, which each run names for itself."""
+    settings = json.loads(json.dumps(hyperparams, default=str))
+    for entry in (settings, settings.get("gail")):
+        if isinstance(entry, dict):
+            entry.pop("demos", None)
+    return settings
+
+
+def trained_with_earlier_settings(run: Dict[str, Any], config_dir: Optional[Path] = None) -> bool:
+    """
+    Whether a stored run's hyperparameters differ from its algorithm's entry now (or the entry is gone). A GAIL run
+    that IRL-MPC shared stores IRL-MPC's entry, GAIL's inside it.
+
+    :param run: a result (:func:`load_results`)
+    :param config_dir: the folder of the hyperparameter files (``None``: the shipped ones)
+    """
+    stored = run["hyperparams"]
+    if run["algo"] == "gail":
+        stored = stored.get("gail", stored)
+    try:
+        entry = load_config(run["algo"], run["env_id"], config_dir)
+    except ValueError:
+        return True
+    return comparable_settings(stored) != comparable_settings(entry)
+
+
+def seeds_cell(runs: Sequence[Dict[str, Any]], n_seeds: Optional[int], config_dir: Optional[Path] = None) -> str:
+    """
+    A table's seeds cell: the runs done (of those asked for, marked incomplete when fewer), and how many of them were
+    trained with earlier settings (:data:`EARLIER_SETTINGS_NOTE`).
+
+    :param runs: the row's results
+    :param n_seeds: seeds asked for (``None``: only the count)
+    :param config_dir: the folder of the hyperparameter files (``None``: the shipped ones)
+    """
+    done = f"{len(runs)}"
+    if n_seeds is not None:
+        done += f"/{n_seeds}" + ("" if len(runs) >= n_seeds else " **incomplete**")
+    earlier = sum(trained_with_earlier_settings(run, config_dir) for run in runs)
+    return done + (f" ({earlier} ‡)" if earlier else "")
+
+
 def steps_summary(runs: Sequence[Dict[str, Any]]) -> str:
     """
     Env steps to reach a normalised score of 0.9: the median over the seeds that reached it, and how many did.
@@ -328,7 +381,10 @@ def steps_summary(runs: Sequence[Dict[str, Any]]) -> str:
     return f"{int(np.median(reached))} ({len(reached)}/{len(runs)})"
 
 
-def grid_table(results: List[Dict[str, Any]], env_id: str, algos: Sequence[str], demos: Sequence[int], n_seeds: int) -> str:
+def grid_table(
+    results: List[Dict[str, Any]], env_id: str, algos: Sequence[str], demos: Sequence[int], n_seeds: int,
+    config_dir: Optional[Path] = None,
+) -> str:  # fmt: skip
     """
     The markdown table of one env: per algorithm and demo count, seeds done, final normalised score mean and 95% CI,
     env steps to 0.9.
@@ -338,13 +394,14 @@ def grid_table(results: List[Dict[str, Any]], env_id: str, algos: Sequence[str],
     :param algos: rows
     :param demos: demo counts
     :param n_seeds: seeds asked for (cells with fewer are marked incomplete)
+    :param config_dir: the folder of the hyperparameter files the runs are checked against (``None``: the shipped ones)
     """
     lines = ["| algorithm | demos | seeds | normalised score (mean ± 95% CI) | env steps to 0.9: median (seeds reached) |",
              "|---|---|---|---|---|"]  # fmt: skip
     for algo in algos:
         for n_demos in demos:
             runs = [r for r in results if r["env_id"] == env_id and r["algo"] == algo and r["n_demos"] == n_demos]
-            done = f"{len(runs)}/{n_seeds}" + ("" if len(runs) >= n_seeds else " **incomplete**")
+            done = seeds_cell(runs, n_seeds, config_dir)
             if not runs:
                 lines.append(f"| {ALGO_LABELS[algo]} | {n_demos} | {done} | not run | not run |")
                 continue
@@ -451,8 +508,9 @@ def ood_measures(record: Dict[str, Any]) -> Dict[str, float]:
     """
     One run's OOD figures: the fraction of episodes ending within :data:`GOAL_RADIUS` of the goal (all, and among the
     starts any policy can reach: within ``MAX_TRAVEL + GOAL_RADIUS``), the mean final reward and the mean progress
-    ``(start distance - final distance) / start distance``, and the share of episodes ending in a circle. Records
-    without start poses give only the first and the third.
+    ``(start distance - final distance) / start distance``, and the shares of episodes ending in a circle, anywhere
+    and farther than :data:`CIRCLING_AWAY` from the goal. Records without start poses give only the first and the
+    third.
 
     :param record: a result's ``ood`` entry
     """
@@ -465,13 +523,16 @@ def ood_measures(record: Dict[str, Any]) -> Dict[str, float]:
         measures["reached_reachable"] = float(np.mean(final_distances[reachable] < GOAL_RADIUS))
         measures["progress"] = float(np.mean((start_distances - final_distances) / start_distances))
     if "circling" in record:
-        measures["circling"] = float(np.mean(record["circling"]))
+        circling = np.asarray(record["circling"], dtype=bool)
+        measures["circling"] = float(circling.mean())
+        measures["circling_away"] = float(np.mean(circling & (final_distances > CIRCLING_AWAY)))
     return measures
 
 
 def ood_table(
-    results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int, ceiling: Optional[Dict[str, Any]] = None
-) -> str:
+    results: List[Dict[str, Any]], algos: Sequence[str], n_demos: int, ceiling: Optional[Dict[str, Any]] = None,
+    config_dir: Optional[Path] = None,
+) -> str:  # fmt: skip
     """
     The navigation OOD table: per algorithm, :func:`ood_measures`' means over seeds with their 95% CIs.
 
@@ -479,12 +540,13 @@ def ood_table(
     :param algos: rows
     :param n_demos: demo count
     :param ceiling: :func:`true_reward_record` on the same starts, the last row
+    :param config_dir: the folder of the hyperparameter files the runs are checked against (``None``: the shipped ones)
     """
-    columns = ("reached_reachable", "reached", "final_reward", "progress")
+    columns = ("reached_reachable", "reached", "final_reward", "progress", "circling_away")
     lines = [
         f"| algorithm | seeds | ends within {GOAL_RADIUS:g} m of goal, reachable starts | ... all starts | mean final reward "
-        "| mean progress |",
-        "|---|---|---|---|---|---|",
+        f"| mean progress | ends circling farther than {CIRCLING_AWAY:g} m from the goal |",
+        "|---|---|---|---|---|---|---|",
     ]
     for algo in algos:
         runs = [
@@ -495,7 +557,7 @@ def ood_table(
             continue
         measures = [ood_measures(run["ood"]) for run in runs]
         cells = [format_ci(*mean_ci([m[c] for m in measures])) if all(c in m for m in measures) else "–" for c in columns]
-        lines.append(f"| {ALGO_LABELS[algo]} | {len(runs)} | " + " | ".join(cells) + " |")
+        lines.append(f"| {ALGO_LABELS[algo]} | {seeds_cell(runs, None, config_dir)} | " + " | ".join(cells) + " |")
     if ceiling is not None:
         measures = ood_measures(ceiling)
         lines.append(f"| {TRUE_REWARD_LABEL} | – | " + " | ".join(f"{measures[c]:.2f}" for c in columns) + " |")
@@ -734,6 +796,7 @@ def write_report(
     timesteps: Optional[int] = None,
     report_file: Path = BENCHMARKS_FILE,
     figures_dir: Path = FIGURES_DIR,
+    config_dir: Optional[Path] = None,
 ) -> None:
     """
     Writes one BENCHMARKS.md section per env grid (``baselines-<grid name>``; navigation also
@@ -749,6 +812,7 @@ def write_report(
     :param timesteps: the budget override, or ``None``
     :param report_file: the markdown file
     :param figures_dir: folder of the figures
+    :param config_dir: the folder of the hyperparameter files the runs are checked against (``None``: the shipped ones)
     """
     for env in envs:
         demo_set, env_id = grid_of(env)
@@ -781,9 +845,11 @@ def write_report(
             "each multiple of `--eval-every` (default a tenth of the budget), after whole rollouts or rounds, so env "
             "steps to 0.9 are resolved to that grid.",
             "",
-            grid_table(results, env_id, grid_algos, grid_demos, grid_seeds),
+            grid_table(results, env_id, grid_algos, grid_demos, grid_seeds, config_dir),
             "",
         ]
+        earlier = any(trained_with_earlier_settings(run, config_dir) for run in results if run["algo"] in grid_algos)
+        lines += [EARLIER_SETTINGS_NOTE, ""] if earlier else []
         for n_demos in grid_demos:
             mpail, gail = ([r for r in results if r["env_id"] == env_id and r["algo"] == a and r["n_demos"] == n_demos]
                            for a in ("mpail", "gail"))  # fmt: skip
@@ -818,9 +884,10 @@ def write_report(
                 "(x, y, cos yaw, sin yaw) under a Gaussian fitted to the expert's poses (the paper's appendix). "
                 f"{TRUE_REWARD_NOTE}",
                 "",
-                ood_table(results, grid_algos, n_ood, true_reward_record(n_ood_starts, results_dir)),
+                ood_table(results, grid_algos, n_ood, true_reward_record(n_ood_starts, results_dir), config_dir),
                 "",
             ]
+            ood += [EARLIER_SETTINGS_NOTE, ""] if earlier else []
             if figure is not None:
                 ood.append(f"![final positions](benchmarks/figures/{figure.name})")
             ood += ["", f"{command_line([r for r in results if 'ood' in r], command)}."]
@@ -923,7 +990,7 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
         jobs = make_jobs(args.envs, args.algos, args.demos, range(args.seeds))
         run_grid(jobs, options | dict(command=command), args.workers, args.ray_address)
     write_report(args.results_dir, args.envs, args.algos, args.demos, args.seeds, command, args.timesteps, args.report_file,
-                 args.figures_dir)  # fmt: skip
+                 args.figures_dir, args.config_dir)  # fmt: skip
 
 
 if __name__ == "__main__":

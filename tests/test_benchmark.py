@@ -47,11 +47,26 @@ def test_runner_writes_results_and_report(tmp_path):
     text = report.read_text()
     assert "<!-- baselines-pendulum:start -->" in text and "<!-- baselines-navigation-ood:start -->" in text
     assert "| BC (uses expert actions) | 4 | 1/1 |" in text
+    assert "‡" not in text  # every run trained with its config's entry as it stands, GAIL's inside IRL-MPC's shared run
     # the OOD table's last row: the untrained planner on the true reward, from the same 3 starts
     ceiling = json.loads((results / "navigation_true_reward" / "3starts.json").read_text())
     assert len(ceiling["final_positions"]) == 3
     assert f"| {TRUE_REWARD_LABEL} | – | {ood_measures(ceiling)['reached_reachable']:.2f} |" in text
     assert (tmp_path / "figures" / "baselines_navigation_ood.png").exists()
+
+
+def test_runs_trained_with_an_earlier_entry_of_their_config_are_marked_in_the_report(tmp_path):
+    configs, results, report = tiny_configs(tmp_path / "configs"), tmp_path / "results", tmp_path / "B.md"
+    arguments = ["--envs", "pendulum", "--algos", "bc", "--demos", "4", "--seeds", "1", "--config-dir", str(configs),
+                 "--results-dir", str(results), "--report-file", str(report), "--figures-dir", str(tmp_path / "figures"),
+                 "--eval-episodes", "2"]  # fmt: skip
+    main(arguments)
+    assert "| BC (uses expert actions) | 4 | 1/1 |" in report.read_text()
+    bc = configs / "bc.yml"
+    bc.write_text(bc.read_text().replace("n_epochs: 1", "n_epochs: 2"))
+    main([*arguments, "--report-only"])
+    text = report.read_text()
+    assert "| BC (uses expert actions) | 4 | 1/1 (1 ‡) |" in text and runner.EARLIER_SETTINGS_NOTE in text
 
 
 def test_a_second_invocation_trains_nothing(tmp_path, monkeypatch, capsys):
@@ -162,17 +177,18 @@ def test_curve_points_average_exactly_one_episode_per_seed():
     assert score == pytest.approx(normalised_score(mean_return, stats))
 
 
-def test_ood_measures_count_only_reachable_starts_and_progress_relative_to_the_start_distance():
+def test_ood_measures_count_only_reachable_starts_progress_relative_to_the_start_distance_and_circles_away_from_the_goal():
     offset = runner.REWARD_OFFSET
     # starts 10 m, 20 m and 40 m (unreachable in 100 steps) from the goal; final distances 1, 10 and 1 m
     starts = [[0.0, 10.0, 0.0], [10.0, -10.0, 1.0], [10.0, -30.0, 2.0]]
-    record = dict(start_poses=starts, final_rewards=[offset - 1.0, offset - 10.0, offset - 1.0], circling=[False, True, False])
+    record = dict(start_poses=starts, final_rewards=[offset - 1.0, offset - 10.0, offset - 1.0], circling=[True, True, False])
     measures = runner.ood_measures(record)
     assert measures["reached"] == pytest.approx(2 / 3)
     assert measures["reached_reachable"] == pytest.approx(1 / 2)
     assert measures["progress"] == pytest.approx(np.mean([9 / 10, 10 / 20, 39 / 40]))
     assert measures["final_reward"] == pytest.approx(offset - 4.0)
-    assert measures["circling"] == pytest.approx(1 / 3)
+    assert measures["circling"] == pytest.approx(2 / 3)
+    assert measures["circling_away"] == pytest.approx(1 / 3)  # the circle 1 m from the goal is the expert's
 
 
 def test_an_ablation_report_names_the_machine_its_runs_ran_on(tmp_path):
@@ -263,16 +279,16 @@ def test_a_scenario_seed_that_already_ran_with_the_same_settings_is_read_back_no
 def test_evaluating_a_navigation_ablation_again_replaces_its_figures_keeps_its_training_and_says_so(tmp_path, monkeypatch):
     from benchmarks import navigation_ablations
 
-    stored = dict(variant="defaults", seed=1, train_seconds=12.5, id_score=0.1, reached_reachable=0.2, machine="A")
-    (tmp_path / "defaults_seed1.json").write_text(json.dumps(stored))
-    (tmp_path / "defaults_seed1.zip").write_text("a saved model")
+    stored = dict(variant="one-discriminator", seed=1, train_seconds=12.5, id_score=0.1, reached_reachable=0.2, machine="A")
+    (tmp_path / "one-discriminator_seed1.json").write_text(json.dumps(stored))
+    (tmp_path / "one-discriminator_seed1.zip").write_text("a saved model")
     loaded = []
     monkeypatch.setattr(navigation_ablations.MPAIL, "load", lambda path, device: loaded.append(path) or "model")
     monkeypatch.setattr(navigation_ablations, "evaluation",
                         lambda model, variant, seed: dict(id_score=0.9, reached_reachable=0.6))  # fmt: skip
-    navigation_ablations.reevaluate_variant("defaults", 1, tmp_path, tmp_path)
-    result = json.loads((tmp_path / "defaults_seed1.json").read_text())
-    assert loaded == [tmp_path / "defaults_seed1.zip"]
+    navigation_ablations.reevaluate_variant("one-discriminator", 1, tmp_path, tmp_path)
+    result = json.loads((tmp_path / "one-discriminator_seed1.json").read_text())
+    assert loaded == [tmp_path / "one-discriminator_seed1.zip"]
     assert (result["id_score"], result["reached_reachable"], result["train_seconds"]) == (0.9, 0.6, 12.5)
     assert result["reevaluated"]["deterministic_noise"] == DETERMINISTIC_NOISE
 
@@ -299,7 +315,8 @@ def test_scenario_runs_record_the_scenario_s_own_figures_beside_mpail_s_scenario
 def test_a_navigation_ablation_scored_by_the_same_samples_planner_is_marked_until_evaluated_again(tmp_path, monkeypatch):
     from benchmarks import navigation_ablations
 
-    figures = dict(id_score=0.9, reached_reachable=0.3, final_reward=7.0, progress=0.5, circling=0.2, machine="A")
+    figures = dict(id_score=0.9, reached_reachable=0.3, final_reward=7.0, progress=0.5, circling=0.2, circling_away=0.1,
+                   machine="A")
     for seed in range(2):
         run = dict(figures, variant="concave-value", seed=seed, deterministic_noise=SAME_NOISE)
         (tmp_path / f"concave-value_seed{seed}.json").write_text(json.dumps(run))
@@ -317,7 +334,8 @@ def test_a_navigation_ablation_scored_by_the_same_samples_planner_is_marked_unti
 def test_the_navigation_ablations_report_quotes_each_runs_own_command(tmp_path, monkeypatch):
     from benchmarks import navigation_ablations
 
-    figures = dict(id_score=0.9, reached_reachable=0.3, final_reward=7.0, progress=0.5, circling=0.2, machine="A")
+    figures = dict(id_score=0.9, reached_reachable=0.3, final_reward=7.0, progress=0.5, circling=0.2, circling_away=0.1,
+                   machine="A")
     commands = {0: "python -m benchmarks.navigation_ablations --variants concave-value --seeds 0", 1: None}
     for seed, command in commands.items():
         run = dict(figures, variant="concave-value", seed=seed, **({"command": command} if command else {}))
