@@ -55,11 +55,17 @@ def test_runner_writes_results_and_report(tmp_path):
     assert (tmp_path / "figures" / "baselines_navigation_ood.png").exists()
 
 
-def test_runs_trained_with_an_earlier_entry_of_their_config_are_marked_in_the_report(tmp_path):
+def bc_grid_on_pendulum(tmp_path):
+    """A one-seed BC grid on the pendulum in ``tmp_path``: its tiny configs, results folder, report and command line."""
     configs, results, report = tiny_configs(tmp_path / "configs"), tmp_path / "results", tmp_path / "B.md"
     arguments = ["--envs", "pendulum", "--algos", "bc", "--demos", "4", "--seeds", "1", "--config-dir", str(configs),
                  "--results-dir", str(results), "--report-file", str(report), "--figures-dir", str(tmp_path / "figures"),
                  "--eval-episodes", "2"]  # fmt: skip
+    return configs, results, report, arguments
+
+
+def test_runs_trained_with_an_earlier_entry_of_their_config_are_marked_in_the_report(tmp_path):
+    configs, results, report, arguments = bc_grid_on_pendulum(tmp_path)
     main(arguments)
     assert "| BC (uses expert actions) | 4 | 1/1 |" in report.read_text()
     bc = configs / "bc.yml"
@@ -70,10 +76,7 @@ def test_runs_trained_with_an_earlier_entry_of_their_config_are_marked_in_the_re
 
 
 def test_a_second_invocation_trains_nothing(tmp_path, monkeypatch, capsys):
-    configs, results = tiny_configs(tmp_path / "configs"), tmp_path / "results"
-    arguments = ["--envs", "pendulum", "--algos", "bc", "--demos", "4", "--seeds", "1", "--config-dir", str(configs),
-                 "--results-dir", str(results), "--report-file", str(tmp_path / "B.md"), "--figures-dir",
-                 str(tmp_path / "figures"), "--eval-episodes", "2"]  # fmt: skip
+    configs, results, _, arguments = bc_grid_on_pendulum(tmp_path)
     main(arguments)
     before = (results / "pendulum" / "bc_4demos_seed0.json").read_text()
 
@@ -97,10 +100,7 @@ def test_a_second_invocation_trains_nothing(tmp_path, monkeypatch, capsys):
 
 
 def test_a_section_filled_by_two_invocations_quotes_both_commands(tmp_path):
-    configs, results, report = tiny_configs(tmp_path / "configs"), tmp_path / "results", tmp_path / "B.md"
-    arguments = ["--envs", "pendulum", "--algos", "bc", "--demos", "4", "--seeds", "1", "--config-dir", str(configs),
-                 "--results-dir", str(results), "--report-file", str(report), "--figures-dir", str(tmp_path / "figures"),
-                 "--eval-episodes", "2"]  # fmt: skip
+    configs, results, report, arguments = bc_grid_on_pendulum(tmp_path)
     main(arguments)
     main([*arguments[:7], "2", *arguments[8:]])  # runs seed 1 only
     first, second = ("python -m benchmarks.runner --envs pendulum --algos bc --demos 4 --seeds " + n for n in "12")
