@@ -167,6 +167,12 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
             )
         ),
     ),
+    "critic-layer-norm": dict(
+        question="a LayerNorm after each hidden layer of the prior's Q networks (TD-MPC2's and MPAIL2's critics), whose "
+        "value of the horizon's last state is the planner's terminal value: Q bounded where the learned model's "
+        "roll-outs leave the states it was trained on",
+        changes=dict(policy_kwargs=dict(prior_kwargs=dict(critic_layer_norm=True))),
+    ),
     "gradient-penalty": dict(
         question="a gradient penalty on the discriminator (weight 10, between expert and agent transitions) instead of "
         "spectral norm, as MPAIL2's critic bounds its slope",

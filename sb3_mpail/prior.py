@@ -14,10 +14,13 @@ import torch as th
 import torch.nn.functional as F
 from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.policies import ContinuousCritic
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.sac.policies import SACPolicy
 from torch import nn
 
 from sb3_mpail.checks import (
+    BOOLEAN,
     FRACTION,
     HIDDEN_SIZES,
     OPTIONAL_UNIT_INTERVAL,
@@ -29,6 +32,26 @@ from sb3_mpail.checks import (
 
 #: what the prior's Q targets do where an episode terminated (see :class:`PriorReplay`)
 PRIOR_TERMINATIONS = ("cut", "bootstrap", "absorbing")
+
+
+class LayerNormCriticSACPolicy(SACPolicy):
+    """
+    SB3's SAC networks with a ``LayerNorm`` after each hidden product of every Q network, before its activation (as
+    TD-MPC2's and MPAIL2's critics): normalised features bound how far Q can extrapolate beyond the states it was
+    trained on, which is where the planner's learned model ends its roll-outs.
+    """
+
+    def make_critic(self, features_extractor: Optional[BaseFeaturesExtractor] = None) -> ContinuousCritic:
+        critic = super().make_critic(features_extractor)
+        for index, q_network in enumerate(critic.q_networks):
+            layers: List[nn.Module] = []
+            for layer in q_network[:-1]:
+                layers.append(layer)
+                if isinstance(layer, nn.Linear):
+                    layers.append(nn.LayerNorm(layer.out_features, device=layer.weight.device))
+            critic.q_networks[index] = nn.Sequential(*layers, q_network[-1])
+            critic.add_module(f"qf{index}", critic.q_networks[index])  # replaces the plain network's registration
+        return critic
 
 
 class PolicyPrior(nn.Module):
@@ -48,6 +71,8 @@ class PolicyPrior(nn.Module):
         with this coefficient (0: the running mean throughout). Meant to steady a value whose landscape swings from one
         rollout to the next; on Hopper an average over some 40k env steps lowered the score instead
         (docs/learned-models.md). ``None``: the online Q networks
+    :param critic_layer_norm: a ``LayerNorm`` after each hidden layer of the Q networks
+        (:class:`LayerNormCriticSACPolicy`)
     """
 
     def __init__(
@@ -60,6 +85,7 @@ class PolicyPrior(nn.Module):
         gamma: float = 0.99,
         tau: float = 0.005,
         value_tau: Optional[float] = None,
+        critic_layer_norm: bool = False,
     ):
         super().__init__()
         check_arguments(
@@ -69,8 +95,9 @@ class PolicyPrior(nn.Module):
             gamma=(gamma, FRACTION),
             tau=(tau, UNIT_INTERVAL),
             value_tau=(value_tau, OPTIONAL_UNIT_INTERVAL),
+            critic_layer_norm=(critic_layer_norm, BOOLEAN),
         )
-        self.sac = SACPolicy(
+        self.sac = (LayerNormCriticSACPolicy if critic_layer_norm else SACPolicy)(
             observation_space,
             action_space,
             lambda _: learning_rate,

@@ -26,8 +26,8 @@ def demos():
     return pendulum_trajectories()
 
 
-def prior_model(demos, value_tau=None, **kwargs):
-    planner = dict(PRIOR_PLANNER, prior_kwargs=dict(PRIOR_PLANNER["prior_kwargs"], value_tau=value_tau))
+def prior_model(demos, prior_kwargs=None, **kwargs):
+    planner = dict(PRIOR_PLANNER, prior_kwargs=dict(PRIOR_PLANNER["prior_kwargs"], **(prior_kwargs or {})))
     return make_model(demos, n_envs=2, policy_kwargs=planner, discriminator_update_interval=1, **kwargs)
 
 
@@ -82,6 +82,24 @@ def test_a_slow_value_plans_with_the_running_mean_of_the_q_weights_then_their_po
     assert not th.allclose(slow, th.cat(prior.sac.critic(states, mean_actions), dim=1).mean(dim=1))
 
 
+def test_a_layer_norm_critic_bounds_q_far_from_its_training_states_and_trains_its_norms():
+    observation_space, action_space = spaces.Box(-1, 1, (2,)), spaces.Box(-1, 1, (1,))
+    plain = PolicyPrior(observation_space, action_space, net_arch=(8, 8))
+    normed = PolicyPrior(observation_space, action_space, net_arch=(8, 8), critic_layer_norm=True)
+    for critic in (normed.sac.critic, normed.sac.critic_target):
+        assert [sum(isinstance(layer, th.nn.LayerNorm) for layer in q) for q in critic.q_networks] == [2, 2]
+    far, actions = th.full((1, 2), 1e6), th.zeros(1, 1)
+    for q_network, q_value in zip(normed.sac.critic.q_networks, normed.sac.critic(far, actions)):
+        last = q_network[-1]  # |Q| <= |w| sqrt(width) + |b|: a normalised feature's norm is at most sqrt(width)
+        assert q_value.abs().item() <= last.weight.norm().item() * 8**0.5 + last.bias.abs().item() + 1e-4
+    assert max(q.abs().item() for q in plain.sac.critic(far, actions)) > 1e3  # the plain critic extrapolates linearly
+    norms = [layer.weight.detach().clone() for layer in normed.sac.critic.modules() if isinstance(layer, th.nn.LayerNorm)]
+    states = th.randn(16, 2, generator=th.Generator().manual_seed(0))
+    normed.update(states, th.zeros(16, 1), states, states[:, :1], th.ones(16, 1))
+    trained = [layer.weight for layer in normed.sac.critic.modules() if isinstance(layer, th.nn.LayerNorm)]
+    assert all(not th.equal(before, after) for before, after in zip(norms, trained))
+
+
 def test_learning_with_a_prior_trains_it_off_policy_on_every_transition_and_not_the_on_policy_value(demos):
     model = prior_model(demos, prior_batch_size=8)
     prior = [p.detach().clone() for p in model.policy.prior.parameters()]
@@ -92,9 +110,9 @@ def test_learning_with_a_prior_trains_it_off_policy_on_every_transition_and_not_
     assert all(th.equal(before, after) for before, after in zip(value, model.policy.value_net.parameters()))
 
 
-@pytest.mark.parametrize("value_tau", [None, 0.1])
-def test_a_seeded_run_with_a_prior_is_reproducible_and_its_reloaded_copy_plans_the_same(demos, tmp_path, value_tau):
-    first, second = (prior_model(demos, value_tau, prior_batch_size=8).learn(48) for _ in range(2))
+@pytest.mark.parametrize("prior_kwargs", [{}, dict(value_tau=0.1), dict(critic_layer_norm=True)])
+def test_a_seeded_run_with_a_prior_is_reproducible_and_its_reloaded_copy_plans_the_same(demos, tmp_path, prior_kwargs):
+    first, second = (prior_model(demos, prior_kwargs, prior_batch_size=8).learn(48) for _ in range(2))
     observations = first.env.reset()
     actions = first.predict(observations, deterministic=True)[0]
     np.testing.assert_array_equal(actions, second.predict(observations, deterministic=True)[0])
@@ -160,6 +178,7 @@ def test_a_model_saved_with_the_former_boolean_termination_setting_loads_with_wh
         (dict(prior_kwargs=dict(n_critics=0)), {}, "n_critics"),
         (dict(prior_kwargs=dict(tau=1.5)), {}, "tau"),
         (dict(prior_kwargs=dict(value_tau=-0.1)), {}, "value_tau"),
+        (dict(prior_kwargs=dict(critic_layer_norm="yes")), {}, "critic_layer_norm"),
         (dict(n_proposals=-1), {}, "n_proposals"),
         (dict(policy_prior="yes"), {}, "policy_prior"),
         ({}, dict(prior_updates_per_step=-1), "prior_updates_per_step"),
