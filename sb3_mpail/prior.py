@@ -72,7 +72,7 @@ class PolicyPrior(nn.Module):
         rollout to the next; on Hopper an average over some 40k env steps lowered the score instead
         (docs/learned-models.md). ``None``: the online Q networks
     :param critic_layer_norm: a ``LayerNorm`` after each hidden layer of the Q networks
-        (:class:`LayerNormCriticSACPolicy`)
+        (:class:`LayerNormCriticSACPolicy`); on Hopper it lowered the score (docs/learned-models.md)
     """
 
     def __init__(
