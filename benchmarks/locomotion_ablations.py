@@ -173,6 +173,12 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         "roll-outs leave the states it was trained on",
         changes=dict(policy_kwargs=dict(prior_kwargs=dict(critic_layer_norm=True))),
     ),
+    "redq-critics": dict(
+        question="5 Q networks in the prior, each Q target the minimum of 2 drawn at random and the actor climbing their "
+        "mean (REDQ's and TD-MPC2's ensemble; MPAIL2 keeps 5): the planner's terminal value, the ensemble's mean, averages "
+        "more networks, where the critic carries the score's swing along a run",
+        changes=dict(policy_kwargs=dict(prior_kwargs=dict(n_critics=5, target_critics=2))),
+    ),
     "gradient-penalty": dict(
         question="a gradient penalty on the discriminator (weight 10, between expert and agent transitions) instead of "
         "spectral norm, as MPAIL2's critic bounds its slope",

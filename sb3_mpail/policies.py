@@ -146,7 +146,7 @@ class MPPIPolicy(BasePolicy):
         its Q ensemble is the terminal value (unless ``terminal_value`` is given), so the value network's settings
         (``value_ensemble_size``, ``value_layer_norm``, ``concave_value``) are refused with it; ``False``: the paper's planner
     :param prior_kwargs: keyword arguments of the :class:`~sb3_mpail.prior.PolicyPrior` (``net_arch``, ``n_critics``,
-        ``learning_rate``, ``gamma``, ``tau``, ``value_tau``, ``critic_layer_norm``)
+        ``learning_rate``, ``gamma``, ``tau``, ``value_tau``, ``critic_layer_norm``, ``target_critics``)
     :param n_proposals: sequences per env the prior adds to each iteration's ``n_samples``
     :param standardise_inputs: the discriminator's and the value's inputs (after ``discriminator_features`` and
         ``value_features``) standardised with the demos' statistics (:class:`~sb3_mpail.mppi.costs.StandardisedFeatures`,

@@ -23,6 +23,7 @@ from sb3_mpail.checks import (
     BOOLEAN,
     FRACTION,
     HIDDEN_SIZES,
+    OPTIONAL_POSITIVE_INTEGER,
     OPTIONAL_UNIT_INTERVAL,
     POSITIVE_INTEGER,
     POSITIVE_NUMBER,
@@ -73,6 +74,10 @@ class PolicyPrior(nn.Module):
         (docs/learned-models.md). ``None``: the online Q networks
     :param critic_layer_norm: a ``LayerNorm`` after each hidden layer of the Q networks
         (:class:`LayerNormCriticSACPolicy`); on Hopper it lowered the score (docs/learned-models.md)
+    :param target_critics: where set, each update's Q target is the minimum of this many Q networks drawn at random,
+        and the actor climbs the ensemble's mean Q (REDQ's and TD-MPC2's use of a larger ensemble: its mean, the
+        planner's terminal value, averages more networks without a target as pessimistic as the minimum of all).
+        ``None``: the minimum of every Q network for both (SAC)
     """
 
     def __init__(
@@ -86,6 +91,7 @@ class PolicyPrior(nn.Module):
         tau: float = 0.005,
         value_tau: Optional[float] = None,
         critic_layer_norm: bool = False,
+        target_critics: Optional[int] = None,
     ):
         super().__init__()
         check_arguments(
@@ -96,7 +102,11 @@ class PolicyPrior(nn.Module):
             tau=(tau, UNIT_INTERVAL),
             value_tau=(value_tau, OPTIONAL_UNIT_INTERVAL),
             critic_layer_norm=(critic_layer_norm, BOOLEAN),
+            target_critics=(target_critics, OPTIONAL_POSITIVE_INTEGER),
         )
+        if target_critics is not None and target_critics > n_critics:
+            raise ValueError(f"target_critics ({target_critics}) must not exceed n_critics ({n_critics}): the Q target is "
+                             "the minimum of that many of the prior's Q networks")  # fmt: skip
         self.sac = (LayerNormCriticSACPolicy if critic_layer_norm else SACPolicy)(
             observation_space,
             action_space,
@@ -113,6 +123,7 @@ class PolicyPrior(nn.Module):
         self.gamma = gamma
         self.tau = tau
         self.value_tau = value_tau
+        self.target_critics = target_critics
         self.planning_critic = None
         if value_tau is not None:
             self.planning_critic = copy.deepcopy(self.sac.critic).requires_grad_(False)
@@ -173,6 +184,18 @@ class PolicyPrior(nn.Module):
         q_values = th.cat(critic(flat, th.tanh(mean)), dim=1)
         return q_values.mean(dim=1).view(states.shape[:-1])
 
+    def target_minimum(self, q_values: th.Tensor) -> th.Tensor:
+        """
+        The Q target's pessimistic estimate: the minimum over every Q network, or over ``target_critics`` of them drawn
+        at random (one draw for the whole minibatch).
+
+        :param q_values: ``(batch, n_critics)``
+        :return: ``(batch, 1)``
+        """
+        if self.target_critics is not None:
+            q_values = q_values[:, th.randperm(q_values.shape[1], device=q_values.device)[: self.target_critics]]
+        return q_values.min(dim=1, keepdim=True).values
+
     def update(
         self, states: th.Tensor, unit_actions: th.Tensor, next_states: th.Tensor, rewards: th.Tensor, dones: th.Tensor
     ) -> Dict[str, float]:
@@ -197,7 +220,7 @@ class PolicyPrior(nn.Module):
 
         with th.no_grad():
             next_actions, next_log_prob = actor.action_log_prob(next_states)
-            next_q = th.cat(critic_target(next_states, next_actions), dim=1).min(dim=1, keepdim=True).values
+            next_q = self.target_minimum(th.cat(critic_target(next_states, next_actions), dim=1))
             next_q = next_q - entropy_coefficient * next_log_prob.reshape(-1, 1)
             targets = rewards + (1 - dones) * self.gamma * next_q
         critic_loss = 0.5 * sum(F.mse_loss(q, targets) for q in critic(states, unit_actions))
@@ -206,7 +229,8 @@ class PolicyPrior(nn.Module):
         critic.optimizer.step()
 
         critic.requires_grad_(False)  # the actor's loss needs no critic weight gradients (they were discarded)
-        q_new = th.cat(critic(states, new_actions), dim=1).min(dim=1, keepdim=True).values
+        q_new = th.cat(critic(states, new_actions), dim=1)
+        q_new = q_new.min(dim=1, keepdim=True).values if self.target_critics is None else q_new.mean(dim=1, keepdim=True)
         actor_loss = (entropy_coefficient * log_prob - q_new).mean()
         actor.optimizer.zero_grad()
         actor_loss.backward()

@@ -100,6 +100,19 @@ def test_a_layer_norm_critic_bounds_q_far_from_its_training_states_and_trains_it
     assert all(not th.equal(before, after) for before, after in zip(norms, trained))
 
 
+def test_a_subset_target_is_the_minimum_of_that_many_distinct_q_networks_drawn_at_random():
+    observation_space, action_space = spaces.Box(-1, 1, (2,)), spaces.Box(-1, 1, (1,))
+    q_values = th.arange(5.0).repeat(3, 1)  # every row: Q networks 0..4 valued 0..4
+    assert th.equal(PolicyPrior(observation_space, action_space, n_critics=5).target_minimum(q_values), th.zeros(3, 1))
+    prior = PolicyPrior(observation_space, action_space, n_critics=5, target_critics=2)
+    th.manual_seed(0)
+    draws = th.cat([prior.target_minimum(q_values).T for _ in range(2000)])
+    assert (draws == draws[:, :1]).all()  # one draw for the whole minibatch
+    # the minimum of 2 of 5 distinct networks is network k with probability (4 - k) / 10, never the largest
+    frequencies = th.stack([(draws[:, 0] == k).float().mean() for k in range(5)])
+    assert th.allclose(frequencies, th.tensor([0.4, 0.3, 0.2, 0.1, 0.0]), atol=0.04)
+
+
 def test_learning_with_a_prior_trains_it_off_policy_on_every_transition_and_not_the_on_policy_value(demos):
     model = prior_model(demos, prior_batch_size=8)
     prior = [p.detach().clone() for p in model.policy.prior.parameters()]
@@ -110,7 +123,9 @@ def test_learning_with_a_prior_trains_it_off_policy_on_every_transition_and_not_
     assert all(th.equal(before, after) for before, after in zip(value, model.policy.value_net.parameters()))
 
 
-@pytest.mark.parametrize("prior_kwargs", [{}, dict(value_tau=0.1), dict(critic_layer_norm=True)])
+@pytest.mark.parametrize(
+    "prior_kwargs", [{}, dict(value_tau=0.1), dict(critic_layer_norm=True), dict(n_critics=5, target_critics=2)]
+)
 def test_a_seeded_run_with_a_prior_is_reproducible_and_its_reloaded_copy_plans_the_same(demos, tmp_path, prior_kwargs):
     first, second = (prior_model(demos, prior_kwargs, prior_batch_size=8).learn(48) for _ in range(2))
     observations = first.env.reset()
@@ -179,6 +194,8 @@ def test_a_model_saved_with_the_former_boolean_termination_setting_loads_with_wh
         (dict(prior_kwargs=dict(tau=1.5)), {}, "tau"),
         (dict(prior_kwargs=dict(value_tau=-0.1)), {}, "value_tau"),
         (dict(prior_kwargs=dict(critic_layer_norm="yes")), {}, "critic_layer_norm"),
+        (dict(prior_kwargs=dict(target_critics=0)), {}, "target_critics"),
+        (dict(prior_kwargs=dict(target_critics=3)), {}, "target_critics"),
         (dict(n_proposals=-1), {}, "n_proposals"),
         (dict(policy_prior="yes"), {}, "policy_prior"),
         ({}, dict(prior_updates_per_step=-1), "prior_updates_per_step"),
