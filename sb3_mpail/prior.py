@@ -196,6 +196,18 @@ class PolicyPrior(nn.Module):
             q_values = q_values[:, th.randperm(q_values.shape[1], device=q_values.device)[: self.target_critics]]
         return q_values.min(dim=1, keepdim=True).values
 
+    def actor_q(self, q_values: th.Tensor) -> th.Tensor:
+        """
+        The Q value the actor climbs: the minimum of the Q networks (SAC) or, where ``target_critics`` is set, their
+        mean (REDQ: the subset targets already keep Q from overestimating).
+
+        :param q_values: ``(batch, n_critics)``
+        :return: ``(batch, 1)``
+        """
+        if self.target_critics is None:
+            return q_values.min(dim=1, keepdim=True).values
+        return q_values.mean(dim=1, keepdim=True)
+
     def update(
         self, states: th.Tensor, unit_actions: th.Tensor, next_states: th.Tensor, rewards: th.Tensor, dones: th.Tensor
     ) -> Dict[str, float]:
@@ -229,8 +241,7 @@ class PolicyPrior(nn.Module):
         critic.optimizer.step()
 
         critic.requires_grad_(False)  # the actor's loss needs no critic weight gradients (they were discarded)
-        q_new = th.cat(critic(states, new_actions), dim=1)
-        q_new = q_new.min(dim=1, keepdim=True).values if self.target_critics is None else q_new.mean(dim=1, keepdim=True)
+        q_new = self.actor_q(th.cat(critic(states, new_actions), dim=1))
         actor_loss = (entropy_coefficient * log_prob - q_new).mean()
         actor.optimizer.zero_grad()
         actor_loss.backward()

@@ -100,10 +100,11 @@ def test_a_layer_norm_critic_bounds_q_far_from_its_training_states_and_trains_it
     assert all(not th.equal(before, after) for before, after in zip(norms, trained))
 
 
-def test_a_subset_target_is_the_minimum_of_that_many_distinct_q_networks_drawn_at_random():
+def test_a_subset_target_is_the_minimum_of_that_many_q_networks_drawn_at_random_and_the_actor_climbs_their_mean():
     observation_space, action_space = spaces.Box(-1, 1, (2,)), spaces.Box(-1, 1, (1,))
     q_values = th.arange(5.0).repeat(3, 1)  # every row: Q networks 0..4 valued 0..4
-    assert th.equal(PolicyPrior(observation_space, action_space, n_critics=5).target_minimum(q_values), th.zeros(3, 1))
+    sac = PolicyPrior(observation_space, action_space, n_critics=5)
+    assert th.equal(sac.target_minimum(q_values), th.zeros(3, 1)) and th.equal(sac.actor_q(q_values), th.zeros(3, 1))
     prior = PolicyPrior(observation_space, action_space, n_critics=5, target_critics=2)
     th.manual_seed(0)
     draws = th.cat([prior.target_minimum(q_values).T for _ in range(2000)])
@@ -111,6 +112,7 @@ def test_a_subset_target_is_the_minimum_of_that_many_distinct_q_networks_drawn_a
     # the minimum of 2 of 5 distinct networks is network k with probability (4 - k) / 10, never the largest
     frequencies = th.stack([(draws[:, 0] == k).float().mean() for k in range(5)])
     assert th.allclose(frequencies, th.tensor([0.4, 0.3, 0.2, 0.1, 0.0]), atol=0.04)
+    assert th.equal(prior.actor_q(q_values), th.full((3, 1), 2.0))  # the actor climbs the ensemble's mean, not its minimum
 
 
 def test_learning_with_a_prior_trains_it_off_policy_on_every_transition_and_not_the_on_policy_value(demos):
