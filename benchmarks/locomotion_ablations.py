@@ -361,6 +361,15 @@ def checkpoint_lines(runs: List[Dict[str, Any]]) -> List[str]:
     return lines
 
 
+def paired_difference(runs: List[Dict[str, Any]], entry_scores: Dict[int, float]) -> str:
+    """
+    The mean and 95% CI of a variant's score less the entry's on each seed both ran (seed-to-seed spread cancels), with
+    how many seeds that is; blank where they share none.
+    """
+    differences = [run["score"] - entry_scores[run["seed"]] for run in runs if run["seed"] in entry_scores]
+    return f"{format_ci(*mean_ci(differences), signed=True)} ({len(differences)})" if differences else ""
+
+
 def report(results_dir: Path) -> str:
     """The ``locomotion-ablations`` section: per task, budget and variant, means and 95% CIs over its seeds."""
     lines = [
@@ -375,13 +384,16 @@ def report(results_dir: Path) -> str:
         lines += ["", f"### {runs[0]['env_id']}, {runs[0]['timesteps']} env steps", "",
                   f"{runs[0]['n_eval_episodes']} evaluation episodes per run, on {machines_of(runs)}. Commands: "
                   + "; ".join(f"`{command}`" for command in commands), "",
-                  "| variant | what changes | seeds | score | return | forward speed / expert's | episode length | "
-                  "training seconds | training collapses |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+                  "| variant | what changes | seeds | score | score less the entry's, same seeds | return | forward speed / "
+                  "expert's | episode length | training seconds | training collapses |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        entry_scores = {run["seed"]: run["score"] for run in runs if run["variant"] == "defaults"}
         for name in VARIANTS:
             mine = [run for run in runs if run["variant"] == name]
             if not mine:
                 continue
             cells = [format_ci(*mean_ci([run[key] for run in mine])) for key in ("score", "return", "speed_ratio", "length")]
+            cells.insert(1, paired_difference(mine, entry_scores) if name != "defaults" else "")
             cells.append(f"{sum(run['train_seconds'] for run in mine) / len(mine):.0f}")
             curves = [run["training_curve"] for run in mine if run.get("training_curve")]
             cells.append(f"{sum(map(training_collapsed, curves))} of {len(curves)}" if curves else "")

@@ -91,6 +91,6 @@ def mean_ci(values: Sequence[float]) -> Tuple[float, float]:
     return float(values.mean()), float(stats.t.ppf(0.975, len(values) - 1) * values.std(ddof=1) / math.sqrt(len(values)))
 
 
-def format_ci(mean: float, half_width: float, digits: int = 2) -> str:
-    """``mean ± half_width`` (just the mean when the half-width is NaN)."""
-    return f"{mean:.{digits}f}" + ("" if math.isnan(half_width) else f" ± {half_width:.{digits}f}")
+def format_ci(mean: float, half_width: float, digits: int = 2, signed: bool = False) -> str:
+    """``mean ± half_width`` (just the mean when the half-width is NaN); ``signed``: the mean's sign always shown."""
+    return f"{mean:{'+' if signed else ''}.{digits}f}" + ("" if math.isnan(half_width) else f" ± {half_width:.{digits}f}")

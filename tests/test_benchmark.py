@@ -221,6 +221,28 @@ def test_an_ablation_report_lists_the_scores_along_a_run_that_kept_checkpoints(t
     assert row.endswith("|  |") and row.count("|") == header.count("|")  # no curves recorded: the collapses cell is blank
 
 
+def test_an_ablation_report_gives_each_variants_score_less_the_entrys_on_the_seeds_both_ran(tmp_path):
+    from benchmarks import locomotion_ablations
+
+    grid = tmp_path / "Hopper-v4_100steps"
+    grid.mkdir()
+    scores = dict(defaults=[0.5, 0.7, 0.2], capped_reward=[0.6, 0.9, None, 0.9], alive_bonus=[None, None, None, 0.4])
+    for name, by_seed in scores.items():
+        variant = name.replace("_", "-")
+        for seed, score in enumerate(by_seed):
+            if score is not None:
+                run = dict(env_id="Hopper-v4", variant=variant, seed=seed, timesteps=100, n_eval_episodes=2, command="c",
+                           train_seconds=1.0, score=score, speed_ratio=0.2, length=30.0, machine="m", **{"return": 5.0})
+                (grid / f"{variant}_seed{seed}.json").write_text(json.dumps(run))
+    lines = locomotion_ablations.report(tmp_path).splitlines()
+    cells = [[cell.strip(" `") for cell in line.split("|")] for line in lines if line.startswith("| `")]
+    rows = {row[1]: row for row in cells}
+    header = next(line for line in lines if line.startswith("| variant"))
+    column = [cell.strip() for cell in header.split("|")].index("score less the entry's, same seeds")
+    assert rows["capped-reward"][column] == "+0.15 ± 0.64 (2)"  # +0.1 and +0.2: t(0.975, 1) 12.71 x 0.05
+    assert rows["alive-bonus"][column] == "" and rows["defaults"][column] == ""  # no seed shared; the entry itself
+
+
 @pytest.mark.parametrize(
     "lengths, collapsed",
     [([50, 300, 500, 90], True), ([50, 300, 500, 110], False), ([20, 80, 10], False), ([50, 300, 40, 400], True)],
