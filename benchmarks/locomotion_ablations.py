@@ -179,6 +179,12 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         "more networks, where the critic carries the score's swing along a run",
         changes=dict(policy_kwargs=dict(prior_kwargs=dict(n_critics=5, target_critics=2))),
     ),
+    "n-step-returns": dict(
+        question="the prior's Q targets sum the learned rewards of 3 stored steps before bootstrapping "
+        "(prior_return_steps=3; MPAIL2's critic learns from lambda-returns): a reward the discriminator changed at the "
+        "last rollout reaches the planner's terminal value in fewer updates",
+        changes=dict(prior_return_steps=3),
+    ),
     "gradient-penalty": dict(
         question="a gradient penalty on the discriminator (weight 10, between expert and agent transitions) instead of "
         "spectral norm, as MPAIL2's critic bounds its slope",

@@ -124,6 +124,8 @@ class MPAIL(BaseAlgorithm):
         SAC's do; ``"bootstrap"`` goes on through it (MPAIL2's default), which let the Ant fall in most episodes here;
         ``"absorbing"`` lets the terminal transition's learned reward repeat forever (an absorbing state, as DAC's),
         so ending an episode is worth what the discriminator thinks of how it ends, whatever the reward's offset
+    :param prior_return_steps: each of the prior's Q targets sums the learned rewards of up to this many stored steps
+        of an episode before it bootstraps (n-step returns; see :class:`~sb3_mpail.prior.PriorReplay`); 1: SAC's
     :param agent_reward_mean: where set, the learned reward that trains the value (or the policy prior's Q) is shifted
         after every rollout so that its mean over that rollout's transitions is this (the shift is logged as
         ``train/reward_shift`` and saved with the model). A constant added to every transition leaves the planner's
@@ -176,6 +178,7 @@ class MPAIL(BaseAlgorithm):
         prior_batch_size: int = 256,
         prior_updates_per_step: float = 1.0,
         prior_terminations: str = "cut",
+        prior_return_steps: int = 1,
         agent_reward_mean: float | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -223,6 +226,7 @@ class MPAIL(BaseAlgorithm):
         self.prior_batch_size = prior_batch_size
         self.prior_updates_per_step = prior_updates_per_step
         self.prior_terminations = prior_terminations
+        self.prior_return_steps = prior_return_steps
         self.prior_replay: PriorReplay | None = None
         self.agent_reward_mean = agent_reward_mean
         self.reward_shift = 0.0
@@ -269,6 +273,7 @@ class MPAIL(BaseAlgorithm):
             prior_batch_size=(self.prior_batch_size, POSITIVE_INTEGER),
             prior_updates_per_step=(self.prior_updates_per_step, NON_NEGATIVE_NUMBER),
             prior_terminations=(self.prior_terminations, one_of(PRIOR_TERMINATIONS)),
+            prior_return_steps=(self.prior_return_steps, POSITIVE_INTEGER),
             agent_reward_mean=(self.agent_reward_mean, OPTIONAL_FINITE_NUMBER),
             stats_window_size=(self._stats_window_size, POSITIVE_INTEGER),
             policy_kwargs=(self.policy_kwargs, OPTIONAL_DICT),
@@ -456,6 +461,8 @@ class MPAIL(BaseAlgorithm):
         if "prior_use_terminations" in data and "prior_terminations" not in data:  # a file saved before its rename
             model.prior_terminations = "cut" if data["prior_use_terminations"] else "bootstrap"
             del model.prior_use_terminations
+        if "prior_return_steps" not in data:  # a file saved before n-step targets, which trained one-step ones
+            model.prior_return_steps = 1
         model._check_settings()
         return model
 
@@ -660,6 +667,7 @@ class MPAIL(BaseAlgorithm):
                 self.prior_updates_per_step,
                 self.device,
                 self.prior_terminations,
+                self.prior_return_steps,
             )
         return self.prior_replay
 

@@ -7,7 +7,7 @@ their optimisers are Stable-Baselines3's :class:`~stable_baselines3.sac.policies
 """
 
 import copy
-from typing import Any, Callable, Dict, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Sequence
 
 import numpy as np
 import torch as th
@@ -33,6 +33,18 @@ from sb3_mpail.checks import (
 
 #: what the prior's Q targets do where an episode terminated (see :class:`PriorReplay`)
 PRIOR_TERMINATIONS = ("cut", "bootstrap", "absorbing")
+
+
+class ReturnSamples(NamedTuple):
+    """A minibatch of the prior's Q targets' inputs (:meth:`PriorReplay.sample`), each ``(batch, ...)``."""
+
+    states: th.Tensor  #: the states whose Q is fitted
+    unit_actions: th.Tensor  #: the actions taken there, in ``[-1, 1]``
+    bootstrap_states: th.Tensor  #: where each target bootstraps: the last step's next state
+    returns: th.Tensor  #: the discounted learned rewards up to there, ``(batch, 1)``
+    dones: th.Tensor  #: 1 where the target does not bootstrap (a termination, unless ``"bootstrap"``), ``(batch, 1)``
+    discounts: th.Tensor  #: ``gamma ** steps`` summed, ``(batch, 1)``
+    first_rewards: th.Tensor  #: each first step's learned reward (logged)
 
 
 class LayerNormCriticSACPolicy(SACPolicy):
@@ -209,16 +221,19 @@ class PolicyPrior(nn.Module):
         return q_values.mean(dim=1, keepdim=True)
 
     def update(
-        self, states: th.Tensor, unit_actions: th.Tensor, next_states: th.Tensor, rewards: th.Tensor, dones: th.Tensor
+        self, states: th.Tensor, unit_actions: th.Tensor, next_states: th.Tensor, rewards: th.Tensor, dones: th.Tensor,
+        discounts: Optional[th.Tensor] = None,
     ) -> Dict[str, float]:
         """
         One SAC update on a replayed minibatch labelled with the current learned reward.
 
         :param states: ``(batch, state_dim)``
         :param unit_actions: the actions taken, in ``[-1, 1]``, ``(batch, action_dim)``
-        :param next_states: ``(batch, state_dim)``
-        :param rewards: learned rewards, ``(batch, 1)``
+        :param next_states: the states the targets bootstrap from, ``(batch, state_dim)``
+        :param rewards: learned rewards (or their discounted sums up to ``next_states``), ``(batch, 1)``
         :param dones: 1 where the episode terminated (not a time-limit cut), ``(batch, 1)``
+        :param discounts: the bootstrap's discount, ``(batch, 1)`` (``gamma ** steps`` after a sum of rewards); ``None``:
+            ``gamma``
         :return: the losses and the entropy coefficient
         """
         actor, critic, critic_target = self.sac.actor, self.sac.critic, self.sac.critic_target
@@ -234,7 +249,7 @@ class PolicyPrior(nn.Module):
             next_actions, next_log_prob = actor.action_log_prob(next_states)
             next_q = self.target_minimum(th.cat(critic_target(next_states, next_actions), dim=1))
             next_q = next_q - entropy_coefficient * next_log_prob.reshape(-1, 1)
-            targets = rewards + (1 - dones) * self.gamma * next_q
+            targets = rewards + (1 - dones) * (self.gamma if discounts is None else discounts) * next_q
         critic_loss = 0.5 * sum(F.mse_loss(q, targets) for q in critic(states, unit_actions))
         critic.optimizer.zero_grad()
         critic_loss.backward()
@@ -292,6 +307,10 @@ class PriorReplay:
     :param terminations: one of :data:`PRIOR_TERMINATIONS`: ``"cut"`` zeroes the next state's value where an episode
         terminated (e.g. a fall), as SAC does; ``"bootstrap"`` goes on through terminations (MPAIL2's default);
         ``"absorbing"`` takes the terminal transition's reward ``r`` as repeating forever, ``r / (1 - gamma)``
+    :param return_steps: each Q target sums the learned rewards of up to this many stored steps of the same episode
+        before it bootstraps (n-step returns, as MPAIL2's lambda-returns reach past one step): a reward the
+        discriminator has just changed reaches Q in fewer updates. A sequence stops early at its episode's end or at
+        the newest stored step. 1: SAC's one-step target
     """
 
     def __init__(
@@ -304,6 +323,7 @@ class PriorReplay:
         updates_per_step: float,
         device: th.device,
         terminations: str = "cut",
+        return_steps: int = 1,
     ):
         self.buffer = ReplayBuffer(
             max(buffer_size // n_envs, 1),
@@ -316,6 +336,7 @@ class PriorReplay:
         self.batch_size = batch_size
         self.updates_per_step = updates_per_step
         self.terminations = terminations
+        self.return_steps = return_steps
 
     def add(
         self, prior: PolicyPrior, observations: np.ndarray, next_observations: np.ndarray, actions: np.ndarray,
@@ -324,6 +345,48 @@ class PriorReplay:
         """Stores one step of every env (``next_observations`` the true successors, terminal ones at episode ends)."""
         unit_actions = prior.to_unit_actions(actions)
         self.buffer.add(observations, next_observations, unit_actions, np.zeros(len(dones), np.float32), dones, infos)
+
+    def sample(self, gamma: float, reward: Callable[[th.Tensor, th.Tensor], th.Tensor]) -> ReturnSamples:
+        """
+        A minibatch of Q targets' inputs: steps drawn as SB3's :meth:`ReplayBuffer.sample` draws them (the same indices
+        for the same numpy state), each followed along its env's stored steps for up to ``return_steps`` steps.
+
+        :param gamma: the discount of the learned reward
+        :param reward: the learned reward ``r(s, s')`` on ``(batch, state_dim)`` float32 tensors, ``(batch,)``
+        """
+        buffer, n_steps = self.buffer, self.return_steps
+        starts = np.random.randint(0, buffer.buffer_size if buffer.full else buffer.pos, size=self.batch_size)
+        envs = np.random.randint(0, buffer.n_envs, size=self.batch_size)[:, None]
+        offsets = np.arange(n_steps)
+        indices = (starts[:, None] + offsets) % buffer.buffer_size  # (batch, n_steps)
+        stored_after = (buffer.pos - starts - 1) % buffer.buffer_size + 1  # steps stored from each start on
+        ended = buffer.dones[indices, envs] > 0  # an episode's last step: a termination or a time-limit cut
+        in_sequence = (offsets < stored_after[:, None]) & (np.cumsum(ended, axis=1) - ended == 0)
+        lengths = in_sequence.sum(axis=1)
+        last = indices[np.arange(self.batch_size), lengths - 1]
+        terminated = buffer.dones[last, envs[:, 0]] * (1 - buffer.timeouts[last, envs[:, 0]])
+
+        def tensor(array: np.ndarray) -> th.Tensor:
+            return th.as_tensor(array, dtype=th.float32, device=buffer.device)
+
+        states, next_states = tensor(buffer.observations[indices, envs]), tensor(buffer.next_observations[indices, envs])
+        with th.no_grad():
+            rewards = reward(states.flatten(0, 1), next_states.flatten(0, 1)).view(self.batch_size, n_steps)
+        mask, lengths = tensor(in_sequence), tensor(lengths)
+        returns = (rewards * mask * gamma ** tensor(offsets)).sum(dim=1)
+        terminated = tensor(terminated)
+        if self.terminations == "absorbing":  # the last reward repeats forever: gamma^L r / (1 - gamma) more
+            last_rewards = rewards.gather(1, (lengths.long() - 1)[:, None]).squeeze(1)
+            returns = returns + terminated * gamma**lengths * last_rewards / (1 - gamma)
+        return ReturnSamples(
+            states=states[:, 0],
+            unit_actions=tensor(buffer.actions[starts, envs[:, 0]]),
+            bootstrap_states=tensor(buffer.next_observations[last, envs[:, 0]]),
+            returns=returns[:, None],
+            dones=(th.zeros_like(terminated) if self.terminations == "bootstrap" else terminated)[:, None],
+            discounts=(gamma**lengths)[:, None],
+            first_rewards=rewards[:, 0],
+        )
 
     def train(
         self, prior: PolicyPrior, reward: Callable[[th.Tensor, th.Tensor], th.Tensor], n_new_steps: int
@@ -340,14 +403,10 @@ class PriorReplay:
             return {}
         figures: Dict[str, List[float]] = {}
         for _ in range(round(self.updates_per_step * n_new_steps)):
-            batch = self.buffer.sample(self.batch_size)
-            states, next_states = batch.observations.float(), batch.next_observations.float()
-            with th.no_grad():
-                rewards = reward(states, next_states).reshape(-1, 1)
-            dones = th.zeros_like(rewards) if self.terminations == "bootstrap" else batch.dones.float()
-            if self.terminations == "absorbing":  # r + gamma r / (1 - gamma): the same for any offset added to r
-                rewards = rewards + dones * prior.gamma * rewards / (1 - prior.gamma)
-            update = prior.update(states, batch.actions.float(), next_states, rewards, dones)
-            for name, value in {**update, "reward": float(rewards.mean())}.items():
+            batch = self.sample(prior.gamma, reward)
+            update = prior.update(
+                batch.states, batch.unit_actions, batch.bootstrap_states, batch.returns, batch.dones, batch.discounts
+            )
+            for name, value in {**update, "reward": float(batch.first_rewards.mean())}.items():
                 figures.setdefault(name, []).append(value)
         return {name: float(np.mean(values)) for name, values in figures.items()}

@@ -126,10 +126,19 @@ def test_learning_with_a_prior_trains_it_off_policy_on_every_transition_and_not_
 
 
 @pytest.mark.parametrize(
-    "prior_kwargs", [{}, dict(value_tau=0.1), dict(critic_layer_norm=True), dict(n_critics=5, target_critics=2)]
+    "prior_kwargs, settings",
+    [
+        ({}, {}),
+        (dict(value_tau=0.1), {}),
+        (dict(critic_layer_norm=True), {}),
+        (dict(n_critics=5, target_critics=2), {}),
+        ({}, dict(prior_return_steps=3)),
+    ],
 )
-def test_a_seeded_run_with_a_prior_is_reproducible_and_its_reloaded_copy_plans_the_same(demos, tmp_path, prior_kwargs):
-    first, second = (prior_model(demos, prior_kwargs, prior_batch_size=8).learn(48) for _ in range(2))
+def test_a_seeded_run_with_a_prior_is_reproducible_and_its_reloaded_copy_plans_the_same(
+    demos, tmp_path, prior_kwargs, settings
+):
+    first, second = (prior_model(demos, prior_kwargs, prior_batch_size=8, **settings).learn(48) for _ in range(2))
     observations = first.env.reset()
     actions = first.predict(observations, deterministic=True)[0]
     np.testing.assert_array_equal(actions, second.predict(observations, deterministic=True)[0])
@@ -143,8 +152,8 @@ def test_a_seeded_run_with_a_prior_is_reproducible_and_its_reloaded_copy_plans_t
 class RecordingPrior(PolicyPrior):
     """A prior that records the rewards, termination flags and next states its updates are given."""
 
-    def update(self, states, unit_actions, next_states, rewards, dones):
-        self.seen = dict(rewards=rewards.squeeze(1), dones=dones.squeeze(1), next_states=next_states)
+    def update(self, states, unit_actions, next_states, rewards, dones, discounts=None):
+        self.seen = dict(rewards=rewards.squeeze(1), dones=dones.squeeze(1), next_states=next_states, discounts=discounts)
         return {}
 
 
@@ -169,24 +178,78 @@ def test_the_priors_targets_cut_bootstrap_or_repeat_the_terminal_reward_at_termi
     assert th.allclose(prior.seen["rewards"], expected)
 
 
+def test_one_step_samples_are_sb3s_replay_samples_labelled_with_the_learned_reward():
+    observation_space, action_space = spaces.Box(-1, 1, (3,)), spaces.Box(-1, 1, (2,))
+    prior = PolicyPrior(observation_space, action_space, net_arch=(4,), gamma=0.9)
+    replay = PriorReplay(observation_space, action_space, 2, 40, 16, 1.0, th.device("cpu"))
+    rng = np.random.default_rng(0)
+    for step in range(25):  # past the buffer's 20 steps per env: it wraps
+        done = np.array([step % 7 == 6, step % 5 == 4])
+        infos = [{}, {"TimeLimit.truncated": step % 10 == 4}]
+        replay.add(prior, rng.normal(size=(2, 3)), rng.normal(size=(2, 3)), rng.uniform(-1, 1, (2, 2)), done, infos)
+
+    def reward(states, next_states):
+        return next_states.sum(1) - states[:, 0]
+
+    np.random.seed(3)
+    expected = replay.buffer.sample(16)
+    np.random.seed(3)
+    batch = replay.sample(0.9, reward)
+    states, next_states = expected.observations.float(), expected.next_observations.float()
+    assert th.equal(batch.states, states) and th.equal(batch.bootstrap_states, next_states)
+    assert th.equal(batch.unit_actions, expected.actions.float()) and th.equal(batch.dones, expected.dones.float())
+    assert th.equal(batch.returns, reward(states, next_states)[:, None])
+    assert th.allclose(batch.discounts, th.full((16, 1), 0.9))
+
+
+@pytest.mark.parametrize("terminations", ["cut", "bootstrap", "absorbing"])
+def test_n_step_targets_sum_rewards_to_the_episode_end_or_the_newest_step_and_bootstrap_from_there(terminations):
+    observation_space, action_space = spaces.Box(-100, 100, (1,)), spaces.Box(-1, 1, (1,))
+    prior, gamma, n_steps = PolicyPrior(observation_space, action_space, net_arch=(4,)), 0.9, 3
+    replay = PriorReplay(observation_space, action_space, 1, 12, 64, 1.0, th.device("cpu"), terminations, n_steps)
+    terminal, cut_by_time_limit, newest = {4, 13}, {9}, 14
+    for t in range(newest + 1):  # step t goes from state t to t + 1; 15 steps in a buffer of 12 (t = 3..14 kept)
+        done, infos = np.array([t in terminal | cut_by_time_limit]), [{"TimeLimit.truncated": t in cut_by_time_limit}]
+        replay.add(prior, np.array([[t]]), np.array([[t + 1.0]]), np.zeros((1, 1)), done, infos)
+    np.random.seed(0)
+    batch = replay.sample(gamma, lambda states, next_states: next_states[:, 0])  # step t earns t + 1
+    starts = batch.states[:, 0].long().tolist()
+    assert set(starts) == set(range(3, newest + 1))
+    for row, t in enumerate(starts):
+        end = min([e for e in terminal | cut_by_time_limit if e >= t] + [newest])
+        length = min(n_steps, end - t + 1)
+        last = t + length - 1
+        expected = sum(gamma**k * (t + k + 1) for k in range(length))
+        terminated = last in terminal
+        if terminations == "absorbing" and terminated:
+            expected += gamma**length * (last + 1) / (1 - gamma)
+        assert batch.returns[row, 0].item() == pytest.approx(expected, rel=1e-5)
+        assert batch.bootstrap_states[row, 0].item() == last + 1
+        assert batch.discounts[row, 0].item() == pytest.approx(gamma**length)
+        assert batch.dones[row, 0].item() == float(terminated and terminations != "bootstrap")
+
+
 @pytest.mark.parametrize("used, meant", [(True, "cut"), (False, "bootstrap")])
-def test_a_model_saved_with_the_former_boolean_termination_setting_loads_with_what_it_meant(demos, tmp_path, used, meant):
+def test_a_model_saved_before_the_termination_setting_was_renamed_and_n_step_targets_loads_with_what_it_meant(
+    demos, tmp_path, used, meant
+):
     import json
     import zipfile
 
     saved, former = tmp_path / "saved.zip", tmp_path / "former.zip"
-    prior_model(demos, prior_terminations="absorbing").save(saved)
+    prior_model(demos, prior_terminations="absorbing", prior_return_steps=3).save(saved)
     with zipfile.ZipFile(saved) as archive, zipfile.ZipFile(former, "w") as rewritten:
         for member in archive.namelist():
             content = archive.read(member)
             if member == "data":
                 data = json.loads(content)
-                del data["prior_terminations"]
+                del data["prior_terminations"], data["prior_return_steps"]
                 data["prior_use_terminations"] = used
                 content = json.dumps(data).encode()
             rewritten.writestr(member, content)
     loaded = MPAIL.load(former)
     assert loaded.prior_terminations == meant and not hasattr(loaded, "prior_use_terminations")
+    assert loaded.prior_return_steps == 1  # one-step targets, all that such a file could have trained
 
 
 @pytest.mark.parametrize(
@@ -203,6 +266,7 @@ def test_a_model_saved_with_the_former_boolean_termination_setting_loads_with_wh
         ({}, dict(prior_updates_per_step=-1), "prior_updates_per_step"),
         ({}, dict(prior_batch_size=0), "prior_batch_size"),
         ({}, dict(prior_terminations="never"), "prior_terminations"),
+        ({}, dict(prior_return_steps=0), "prior_return_steps"),
     ],
 )
 def test_bad_prior_settings_are_refused_naming_them(demos, policy_kwargs, settings, named):
