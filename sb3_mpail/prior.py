@@ -43,7 +43,7 @@ class ReturnSamples(NamedTuple):
     bootstrap_states: th.Tensor  #: where each target bootstraps: the last step's next state
     returns: th.Tensor  #: the discounted learned rewards up to there, ``(batch, 1)``
     dones: th.Tensor  #: 1 where the target does not bootstrap (a termination, unless ``"bootstrap"``), ``(batch, 1)``
-    discounts: th.Tensor  #: ``gamma ** steps`` summed, ``(batch, 1)``
+    discounts: th.Tensor  #: the bootstrap's discount, ``gamma ** steps`` over the steps summed, ``(batch, 1)``
     first_rewards: th.Tensor  #: each first step's learned reward (logged)
 
 

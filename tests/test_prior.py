@@ -176,6 +176,7 @@ def test_the_priors_targets_cut_bootstrap_or_repeat_the_terminal_reward_at_termi
     assert th.equal(prior.seen["dones"], (terminal & flags_terminations).float())
     expected = th.where(terminal, 2.0 * terminal_reward_factor, 1.0)
     assert th.allclose(prior.seen["rewards"], expected)
+    assert th.allclose(prior.seen["discounts"], th.full((16, 1), 0.99))  # one-step targets: one discount
 
 
 def test_one_step_samples_are_sb3s_replay_samples_labelled_with_the_learned_reward():
