@@ -363,8 +363,8 @@ class PriorReplay:
         ended = buffer.dones[indices, envs] > 0  # an episode's last step: a termination or a time-limit cut
         in_sequence = (offsets < stored_after[:, None]) & (np.cumsum(ended, axis=1) - ended == 0)
         lengths = in_sequence.sum(axis=1)
-        last = indices[np.arange(self.batch_size), lengths - 1]
-        terminated = buffer.dones[last, envs[:, 0]] * (1 - buffer.timeouts[last, envs[:, 0]])
+        rows, last_steps = np.arange(self.batch_size), lengths - 1
+        terminated = ended[rows, last_steps] * (1 - buffer.timeouts[indices[rows, last_steps], envs[:, 0]])
 
         def tensor(array: np.ndarray) -> th.Tensor:
             return th.as_tensor(array, dtype=th.float32, device=buffer.device)
@@ -381,7 +381,7 @@ class PriorReplay:
         return ReturnSamples(
             states=states[:, 0],
             unit_actions=tensor(buffer.actions[starts, envs[:, 0]]),
-            bootstrap_states=tensor(buffer.next_observations[last, envs[:, 0]]),
+            bootstrap_states=next_states[rows, last_steps],
             returns=returns[:, None],
             dones=(th.zeros_like(terminated) if self.terminations == "bootstrap" else terminated)[:, None],
             discounts=(gamma**lengths)[:, None],
