@@ -185,6 +185,11 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         "last rollout reaches the planner's terminal value in fewer updates",
         changes=dict(prior_return_steps=3),
     ),
+    "weight-averages": dict(
+        question="the entry, its final model also scored with running averages of its policy's weights along the run "
+        "(`--weight-averages`; the planner trains on the live weights): is the score's swing along a run averaged out?",
+        changes={},
+    ),
     "gradient-penalty": dict(
         question="a gradient penalty on the discriminator (weight 10, between expert and agent transitions) instead of "
         "spectral norm, as MPAIL2's critic bounds its slope",
@@ -215,6 +220,43 @@ class TrainingCurve(BaseCallback):
                 self.num_timesteps, round(float(np.mean(lengths)), 1), round(float(np.mean(returns)), 1),
                 round(float(learned_reward), 3),
             ])  # fmt: skip
+
+
+class WeightAverages(BaseCallback):
+    """
+    Exponential moving averages of the policy's parameters, one per rate, each updated after every rollout's update
+    (``average += rate * (live - average)``, from the first update's weights). Buffers (input statistics, spectral
+    norm's singular vectors, the temperature) stay the live model's: they are statistics or settings, not weights.
+    The planner in training never sees the averages.
+    """
+
+    def __init__(self, rates: Sequence[float]) -> None:
+        super().__init__()
+        self.averages: Dict[float, Dict[str, th.Tensor]] = {rate: {} for rate in rates}
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _update(self) -> None:
+        live = dict(self.model.policy.named_parameters(remove_duplicate=False))
+        with th.no_grad():
+            for rate, average in self.averages.items():
+                for name, parameter in live.items():
+                    if name in average:
+                        average[name].lerp_(parameter, rate)
+                    else:
+                        average[name] = parameter.detach().clone()
+
+    def _on_rollout_start(self) -> None:
+        if self.model.n_iterations > 0:  # after the previous rollout's update
+            self._update()
+
+    def _on_training_end(self) -> None:
+        self._update()
+
+    def averaged_state(self, rate: float) -> Dict[str, th.Tensor]:
+        """The policy's state dict with its parameters replaced by their average at ``rate``."""
+        return {**self.model.policy.state_dict(), **self.averages[rate]}
 
 
 def variant_settings(env_id: str, name: str) -> Dict[str, Any]:
@@ -260,6 +302,7 @@ def run_variant(
     out_dir: Path,
     command: str,
     checkpoint_every: int = 0,
+    weight_average_rates: Sequence[float] = (),
 ) -> Path:
     """
     Trains one variant on one seed, evaluates it and writes its result and the trained model beside it (``.zip``; both
@@ -269,6 +312,8 @@ def run_variant(
     :param checkpoint_every: where positive, the model is also saved every this many env steps (in
         ``<variant>_seed<N>_checkpoints/``) and each checkpoint scored as the final model is, to ``checkpoint_scores``:
         does the score move along the run as much as the training episodes do?
+    :param weight_average_rates: the final model is also scored with :class:`WeightAverages`' average of its policy's
+        parameters at each of these rates per rollout, to ``average_scores`` (rate, then :func:`score_model`'s figures)
 
     :return: the result file
     """
@@ -282,7 +327,8 @@ def run_variant(
     model = MPAIL("MlpMPPI", make_vec_env(env_id, n_envs=n_envs, seed=seed), seed=seed, device="cpu", **settings)
     curve = TrainingCurve()
     checkpoints_dir = checkpoints_dir_of(out_dir, name, seed)
-    callbacks: List[BaseCallback] = [curve]
+    averages = WeightAverages(weight_average_rates)
+    callbacks: List[BaseCallback] = [curve, averages]
     if checkpoint_every > 0:
         callbacks.append(CheckpointCallback(max(checkpoint_every // n_envs, 1), str(checkpoints_dir), name_prefix="model"))
     started = time.perf_counter()
@@ -302,6 +348,11 @@ def run_variant(
     result["settings"] = settings  # what the variant's name meant when it ran: the zoo entry may change later
     if checkpoint_every > 0:
         result["checkpoint_scores"] = checkpoint_scores(checkpoints_dir, env_id, n_eval_episodes, seed, reference)
+    if weight_average_rates:
+        result["average_scores"] = []
+        for rate in weight_average_rates:
+            model.policy.load_state_dict(averages.averaged_state(rate))
+            result["average_scores"].append([rate, *score_model(model, env_id, n_eval_episodes, seed, reference)])
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(result, default=repr))
     return path
@@ -367,6 +418,24 @@ def checkpoint_lines(runs: List[Dict[str, Any]]) -> List[str]:
     return lines
 
 
+def average_lines(runs: List[Dict[str, Any]]) -> List[str]:
+    """The scores of the runs whose final policy was also scored with weight averages (``--weight-averages``)."""
+    averaged = sorted((run for run in runs if run.get("average_scores")), key=lambda run: (run["variant"], run["seed"]))
+    if not averaged:
+        return []
+    lines = ["", "Final models scored with running averages of their policy's weights (rate per rollout of "
+             f"{averaged[0]['n_envs'] * averaged[0]['settings']['n_steps']} env steps; the "
+             "planner trained on the live weights):", ""]  # fmt: skip
+    for run in averaged:
+        scores = ", ".join(f"rate {rate} {score:.2f}" for rate, score, _, _ in run["average_scores"])
+        lines.append(f"- `{run['variant']}` seed {run['seed']}: live weights {run['score']:.2f}; {scores}")
+    for index, (rate, *_) in enumerate(averaged[0]["average_scores"]):
+        differences = [run["average_scores"][index][1] - run["score"] for run in averaged]
+        lines.append(f"- rate {rate}, score less the live weights': {format_ci(*mean_ci(differences), signed=True)} "
+                     f"({len(differences)} runs)")  # fmt: skip
+    return lines
+
+
 def paired_difference(runs: List[Dict[str, Any]], entry_scores: Dict[int, float]) -> str:
     """
     The mean and 95% CI of a variant's score less the entry's on each seed both ran (seed-to-seed spread cancels), with
@@ -407,6 +476,7 @@ def report(results_dir: Path) -> str:
             seeds = f"{len(mine)}" + (f" ({same_noise} †)" if same_noise else "")
             lines.append(f"| `{name}` | {VARIANTS[name]['question']} | {seeds} | " + " | ".join(cells) + " |")
         lines += checkpoint_lines(runs)
+        lines += average_lines(runs)
     lines += ["", "Each run on one torch thread. Training collapses: the runs whose mean training episode length (over "
               "the last 100 episodes, at each rollout's end), once past 100 steps, fell below a fifth of its peak; "
               "blank for runs that recorded no curve. †: runs evaluated by a version whose deterministic planning drew "
@@ -425,6 +495,8 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     parser.add_argument("--workers", type=int, default=1, help="runs trained at once, one torch thread each")
     parser.add_argument("--checkpoint-every", type=int, default=0,
                         help="also save and score the model every this many env steps (default: 0, never)")  # fmt: skip
+    parser.add_argument("--weight-averages", type=float, nargs="*", default=[],
+                        help="also score each final model with running averages of its weights (rates a rollout)")  # fmt: skip
     parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR)
     parser.add_argument("--report-only", action="store_true", help="only rewrite the section from stored results")
     args = parser.parse_args(argv)
@@ -436,7 +508,7 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
         with ProcessPoolExecutor(max(1, args.workers), mp_context=multiprocessing.get_context("spawn")) as pool:
             command = "python -m benchmarks.locomotion_ablations " + " ".join(argv if argv is not None else sys.argv[1:])
             futures = [pool.submit(run_variant, args.env, name, seed, args.timesteps, args.eval_episodes, out_dir, command,
-                                   args.checkpoint_every) for name, seed in jobs]  # fmt: skip
+                                   args.checkpoint_every, args.weight_averages) for name, seed in jobs]  # fmt: skip
             for future in futures:
                 print("wrote", future.result(), flush=True)
     th.set_num_threads(1)  # the runs' setting, quoted in the report

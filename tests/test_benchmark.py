@@ -243,6 +243,26 @@ def test_an_ablation_report_gives_each_variants_score_less_the_entrys_on_the_see
     assert rows["alive-bonus"][column] == "" and rows["defaults"][column] == ""  # no seed shared; the entry itself
 
 
+def test_an_ablation_report_gives_each_weight_averages_score_and_its_difference_from_the_live_weights(tmp_path):
+    from benchmarks import locomotion_ablations
+
+    grid = tmp_path / "Hopper-v4_100steps"
+    grid.mkdir()
+    for seed, (live, averaged) in enumerate([(0.5, [0.75, 0.25]), (0.25, [0.75, 0.5]), (0.5, None)]):
+        run = dict(env_id="Hopper-v4", variant="weight-averages", seed=seed, timesteps=100, n_eval_episodes=2, command="c",
+                   train_seconds=1.0, score=live, speed_ratio=0.2, length=30.0, machine="m", n_envs=4,
+                   settings=dict(n_steps=250), **{"return": 5.0})  # fmt: skip
+        if averaged is not None:
+            run["average_scores"] = [[rate, score, 300.0, 1.0] for rate, score in zip((0.05, 0.2), averaged)]
+        (grid / f"weight-averages_seed{seed}.json").write_text(json.dumps(run))
+    text = locomotion_ablations.report(tmp_path)
+    assert "rate per rollout of 1000 env steps" in text
+    assert "- `weight-averages` seed 0: live weights 0.50; rate 0.05 0.75, rate 0.2 0.25" in text
+    assert "seed 2:" not in text
+    assert "- rate 0.05, score less the live weights': +0.38 ± 1.59 (2 runs)" in text  # +0.25, +0.5: 12.71 x 0.125
+    assert "- rate 0.2, score less the live weights': +0.00 ± 3.18 (2 runs)" in text
+
+
 @pytest.mark.parametrize(
     "lengths, collapsed",
     [([50, 300, 500, 90], True), ([50, 300, 500, 110], False), ([20, 80, 10], False), ([50, 300, 40, 400], True)],
@@ -495,3 +515,42 @@ def test_planning_with_the_online_q_is_refused_for_a_prior_without_a_slow_averag
     model = MPAIL("MlpMPPI", "Hopper-v4", demos="hopper_16", n_steps=8, seed=0, device="cpu", policy_kwargs=planner)
     with pytest.raises(ValueError, match="value_tau"):
         locomotion_value_source.plan_with_online_q(model)
+
+
+def test_weight_averages_blend_each_update_at_their_rate_and_leave_the_buffers_live():
+    from stable_baselines3.common.callbacks import BaseCallback
+    from test_mpail import make_model, pendulum_trajectories
+
+    from benchmarks.locomotion_ablations import WeightAverages
+
+    class Snapshots(BaseCallback):  # the parameters at the moments the averages update
+        def __init__(self):
+            super().__init__()
+            self.taken = []
+
+        def _on_step(self):
+            return True
+
+        def _take(self):
+            self.taken.append({name: p.detach().clone() for name, p in self.model.policy.named_parameters()})
+
+        def _on_rollout_start(self):
+            if self.model.n_iterations > 0:
+                self._take()
+
+        def _on_training_end(self):
+            self._take()
+
+    model = make_model(pendulum_trajectories(), discriminator_update_interval=1)
+    averages, snapshots = WeightAverages((0.0, 0.5, 1.0)), Snapshots()
+    model.learn(3 * model.n_steps * model.n_envs, callback=[snapshots, averages])
+    first, second, third = snapshots.taken
+    assert any(not th.equal(first[name], third[name]) for name in first)  # the updates moved the weights
+    live = model.policy.state_dict()
+    for name in first:
+        blend = 0.25 * first[name] + 0.25 * second[name] + 0.5 * third[name]
+        th.testing.assert_close(averages.averaged_state(0.0)[name], first[name])
+        th.testing.assert_close(averages.averaged_state(0.5)[name], blend)
+        th.testing.assert_close(averages.averaged_state(1.0)[name], live[name])
+    buffers = dict(model.policy.named_buffers())
+    assert buffers and all(th.equal(averages.averaged_state(0.0)[name], buffer) for name, buffer in buffers.items())
