@@ -53,6 +53,7 @@ BOOLEAN = Rule("True or False", lambda value: isinstance(value, (bool, np.bool_)
 TIMESTEPS = Rule("a whole number >= 0", lambda value: _is_number(value) and value >= 0 and float(value).is_integer())
 OPTIONAL_POSITIVE_INTEGER = Rule("a positive integer or None", lambda value: value is None or POSITIVE_INTEGER.holds(value))
 OPTIONAL_FINITE_NUMBER = Rule("a finite number or None", lambda value: value is None or _is_number(value))
+OPTIONAL_DECAY_FACTOR = Rule("a number in (0, 1] or None", lambda value: value is None or DECAY_FACTOR.holds(value))
 OPTIONAL_UNIT_INTERVAL = Rule("a number in [0, 1] or None", lambda value: value is None or UNIT_INTERVAL.holds(value))
 OPTIONAL_DICT = Rule("a dict or None", lambda value: value is None or isinstance(value, Mapping))
 

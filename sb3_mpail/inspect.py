@@ -83,9 +83,13 @@ def _tensor(model, array: np.ndarray) -> th.Tensor:
 
 
 def _planning_parts(model):
-    """The model's planner in eval mode, as ``predict`` uses it (in training mode spectral norm would move on every call)."""
-    model.policy.set_training_mode(False)
-    return model.policy.planner
+    """
+    The planner ``predict`` uses (the average of the weights where the model keeps one), in eval mode (in training mode
+    spectral norm would move on every call).
+    """
+    policy = model.deployed_policy()
+    policy.set_training_mode(False)
+    return policy.planner
 
 
 @th.no_grad()
@@ -148,7 +152,7 @@ def decision_field(
     if axes.heading_index is None and len(headings) != 1:
         raise ValueError("Several headings need axes.heading_index, the state index they are written at.")
     planner = _planning_parts(model)
-    policy = model.policy
+    policy = model.deployed_policy()
     templates = np.repeat(np.asarray(template, dtype=np.float32)[None], len(headings), axis=0)
     if axes.heading_index is not None:
         templates[:, axes.heading_index] = headings
@@ -202,7 +206,7 @@ def planned_episodes(
     :param every: keep the samples of steps 0, ``every``, ``2 every``, ...
     """
     planner = _planning_parts(model)
-    policy = model.policy
+    policy = model.deployed_policy()
     planar = [axes.x_index, axes.y_index]
     env = make_vec_env(env_id, n_envs=n_episodes, seed=seed, env_kwargs=env_kwargs)
     observations = env.reset()

@@ -22,6 +22,7 @@ from stable_baselines3.common.utils import explained_variance, safe_mean
 from stable_baselines3.common.vec_env import VecEnv
 from torch.nn import functional as F
 
+from sb3_mpail.averaging import PolicyAverage
 from sb3_mpail.buffers import TransitionRolloutBuffer
 from sb3_mpail.checks import (
     BETAS,
@@ -29,6 +30,7 @@ from sb3_mpail.checks import (
     FRACTION,
     NON_NEGATIVE_INTEGER,
     NON_NEGATIVE_NUMBER,
+    OPTIONAL_DECAY_FACTOR,
     OPTIONAL_DICT,
     OPTIONAL_FINITE_NUMBER,
     OPTIONAL_POSITIVE_INTEGER,
@@ -135,6 +137,11 @@ class MPAIL(BaseAlgorithm):
         small positive mean keeps staying up worth a little, whatever the discriminator makes of the agent. The shift
         takes the place of the policy's constant ``reward_offset``, which must then be 0. ``None``: no shift (the
         paper's)
+    :param policy_average_rate: where set, a running average of the policy's weights is kept beside it (an exponential
+        moving average over training's updates, each weighing this much, from the first update's weights; see
+        :class:`~sb3_mpail.averaging.PolicyAverage`) and :meth:`predict` plans with it, while the planner in training
+        goes on with the live weights (``model.policy``). It is saved with the model. ``None``: ``predict`` plans with
+        the live weights
     :param stats_window_size: episodes averaged in the logged episode return
     :param tensorboard_log: tensorboard log folder
     :param policy_kwargs: keyword arguments of the policy (planner settings, ``dynamics``)
@@ -181,6 +188,7 @@ class MPAIL(BaseAlgorithm):
         prior_terminations: str = "cut",
         prior_return_steps: int = 1,
         agent_reward_mean: float | None = None,
+        policy_average_rate: float | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         policy_kwargs: Dict[str, Any] | None = None,
@@ -231,6 +239,8 @@ class MPAIL(BaseAlgorithm):
         self.prior_replay: PriorReplay | None = None
         self.agent_reward_mean = agent_reward_mean
         self.reward_shift = 0.0
+        self.policy_average_rate = policy_average_rate
+        self.policy_average: PolicyAverage | None = None
         self.episodes_completed = 0
         self.n_iterations = 0
         self.expert: ExpertTransitions | None = None
@@ -276,6 +286,7 @@ class MPAIL(BaseAlgorithm):
             prior_terminations=(self.prior_terminations, one_of(PRIOR_TERMINATIONS)),
             prior_return_steps=(self.prior_return_steps, POSITIVE_INTEGER),
             agent_reward_mean=(self.agent_reward_mean, OPTIONAL_FINITE_NUMBER),
+            policy_average_rate=(self.policy_average_rate, OPTIONAL_DECAY_FACTOR),
             stats_window_size=(self._stats_window_size, POSITIVE_INTEGER),
             policy_kwargs=(self.policy_kwargs, OPTIONAL_DICT),
             verbose=(self.verbose, NON_NEGATIVE_INTEGER),
@@ -347,6 +358,8 @@ class MPAIL(BaseAlgorithm):
         self.policy = self.policy_class(self.observation_space, self.action_space, **self.policy_kwargs)
         self.policy = self.policy.to(self.device)
         self.policy.seed(self.seed)
+        rate = self.policy_average_rate
+        self.policy_average = None if rate is None else PolicyAverage(self.policy, rate)
         self.log_temperature = th.nn.Parameter(th.tensor(math.log(self.initial_temperature), device=self.device))
         self.temperature_optimizer = th.optim.RMSprop([self.log_temperature], lr=self.temperature_learning_rate)
         self.policy.temperature.fill_(self.temperature())
@@ -376,6 +389,8 @@ class MPAIL(BaseAlgorithm):
         super().set_random_seed(seed)
         if getattr(self, "policy", None) is not None:
             self.policy.seed(seed)
+        if getattr(self, "policy_average", None) is not None:
+            self.policy_average.policy.seed(seed)
 
     def set_demos(self, demos: DemoSource) -> None:
         """
@@ -418,6 +433,8 @@ class MPAIL(BaseAlgorithm):
 
     def _get_torch_save_params(self) -> Tuple[List[str], List[str]]:
         state_dicts = ["policy", "discriminator_optimizer", "value_optimizer"]
+        if self.policy_average is not None:
+            state_dicts.append("policy_average")
         if isinstance(self.policy.dynamics, LearnedDynamics):
             state_dicts.append("policy.dynamics.optimizer")
         if self.temperature_mode == "learned":
@@ -458,7 +475,11 @@ class MPAIL(BaseAlgorithm):
                 "train a new model to change it."
             )
         settings = cls._load_settings(kwargs)
+        new_average_rate = settings.pop("policy_average_rate", None) if data.get("policy_average_rate") is None else None
         model = super().load(source, env, device, custom_objects, print_system_info, force_reset, **settings)
+        if new_average_rate is not None:  # the file holds no average to load: it starts at the next update
+            model.policy_average_rate = new_average_rate
+            model.policy_average = PolicyAverage(model.policy, new_average_rate)
         if "prior_use_terminations" in data and "prior_terminations" not in data:  # a file saved before its rename
             model.prior_terminations = "cut" if data["prior_use_terminations"] else "bootstrap"
             del model.prior_use_terminations
@@ -551,6 +572,26 @@ class MPAIL(BaseAlgorithm):
                 self._dump_logs()
         callback.on_training_end()
         return self
+
+    def predict(
+        self,
+        observation: Union[np.ndarray, Dict[str, np.ndarray]],
+        state: Tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+    ) -> Tuple[np.ndarray, Tuple[np.ndarray, ...] | None]:
+        """
+        Plans an action per observation (:meth:`~sb3_mpail.policies.MPPIPolicy.predict`) with the deployed policy: the
+        running average of the weights where ``policy_average_rate`` is set and training has updated it, else the live
+        policy.
+        """
+        return self.deployed_policy().predict(observation, state, episode_start, deterministic)
+
+    def deployed_policy(self) -> MPPIPolicy:
+        """The policy :meth:`predict` plans with: the average of the weights once it has started, else ``self.policy``."""
+        if self.policy_average is not None and self.policy_average.is_started:
+            return self.policy_average.policy
+        return self.policy
 
     def collect_rollouts(self, env: VecEnv, callback: BaseCallback, n_rollout_steps: int) -> bool:
         """
@@ -702,6 +743,8 @@ class MPAIL(BaseAlgorithm):
             self.logger.record("train/dynamics_loss", loss)
             self.logger.record("train/dynamics_learning_rate", self.policy.dynamics.current_learning_rate())
         self.policy.set_training_mode(False)
+        if self.policy_average is not None:
+            self.policy_average.update(self.policy)
         self.logger.record("train/temperature", self.temperature())
         self.logger.record("train/episodes", self.episodes_completed)
 

@@ -165,6 +165,8 @@ def refusal(setting: str, value, expected: str) -> str:
         ("min_temperature", 0.0, "a finite number > 0"),
         ("agent_reward_mean", float("nan"), "a finite number or None"),
         ("agent_reward_mean", "0.2", "a finite number or None"),
+        ("policy_average_rate", 0.0, "a number in (0, 1] or None"),
+        ("policy_average_rate", 1.5, "a number in (0, 1] or None"),
         ("stats_window_size", 0, "a positive integer"),
         ("policy_kwargs", "dict(n_samples=16)", "a dict or None"),
         ("verbose", -1, "a non-negative integer"),
