@@ -41,6 +41,7 @@ from benchmarks.report import (
 )
 from benchmarks.scenarios import zoo_hyperparameters
 from sb3_mpail import MPAIL
+from sb3_mpail.averaging import PolicyAverage
 from sb3_mpail.demos import shipped_demo_info
 from sb3_mpail.envs.locomotion import evaluate_locomotion
 from sb3_mpail.evaluation import normalised_score
@@ -224,28 +225,24 @@ class TrainingCurve(BaseCallback):
 
 class WeightAverages(BaseCallback):
     """
-    Exponential moving averages of the policy's parameters, one per rate, each updated after every rollout's update
-    (``average += rate * (live - average)``, from the first update's weights). Buffers (input statistics, spectral
-    norm's singular vectors, the temperature) stay the live model's: they are statistics or settings, not weights.
-    The planner in training never sees the averages.
+    :class:`~sb3_mpail.averaging.PolicyAverage` at several rates at once (``MPAIL(policy_average_rate=...)`` keeps
+    one), each updated with the weights of every rollout's update; the planner in training never sees them.
     """
 
     def __init__(self, rates: Sequence[float]) -> None:
         super().__init__()
-        self.averages: Dict[float, Dict[str, th.Tensor]] = {rate: {} for rate in rates}
+        self.rates = list(rates)
+        self.averages: Dict[float, PolicyAverage] = {}
 
     def _on_step(self) -> bool:
         return True
 
+    def _on_training_start(self) -> None:
+        self.averages = {rate: PolicyAverage(self.model.policy, rate) for rate in self.rates}
+
     def _update(self) -> None:
-        live = dict(self.model.policy.named_parameters(remove_duplicate=False))
-        with th.no_grad():
-            for rate, average in self.averages.items():
-                for name, parameter in live.items():
-                    if name in average:
-                        average[name].lerp_(parameter, rate)
-                    else:
-                        average[name] = parameter.detach().clone()
+        for average in self.averages.values():
+            average.update(self.model.policy)
 
     def _on_rollout_start(self) -> None:
         if self.model.n_iterations > 0:  # after the previous rollout's update
@@ -253,10 +250,6 @@ class WeightAverages(BaseCallback):
 
     def _on_training_end(self) -> None:
         self._update()
-
-    def averaged_state(self, rate: float) -> Dict[str, th.Tensor]:
-        """The policy's state dict with its parameters replaced by their average at ``rate``."""
-        return {**self.model.policy.state_dict(), **self.averages[rate]}
 
 
 def variant_settings(env_id: str, name: str) -> Dict[str, Any]:
@@ -350,8 +343,8 @@ def run_variant(
         result["checkpoint_scores"] = checkpoint_scores(checkpoints_dir, env_id, n_eval_episodes, seed, reference)
     if weight_average_rates:
         result["average_scores"] = []
-        for rate in weight_average_rates:
-            model.policy.load_state_dict(averages.averaged_state(rate))
+        for rate, average in averages.averages.items():
+            model.policy_average = average  # what predict plans with
             result["average_scores"].append([rate, *score_model(model, env_id, n_eval_episodes, seed, reference)])
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(result, default=repr))

@@ -517,40 +517,15 @@ def test_planning_with_the_online_q_is_refused_for_a_prior_without_a_slow_averag
         locomotion_value_source.plan_with_online_q(model)
 
 
-def test_weight_averages_blend_each_update_at_their_rate_and_leave_the_buffers_live():
-    from stable_baselines3.common.callbacks import BaseCallback
+def test_the_weight_averages_of_an_ablation_run_are_the_ones_mpail_keeps_at_each_rate():
     from test_mpail import make_model, pendulum_trajectories
 
     from benchmarks.locomotion_ablations import WeightAverages
 
-    class Snapshots(BaseCallback):  # the parameters at the moments the averages update
-        def __init__(self):
-            super().__init__()
-            self.taken = []
-
-        def _on_step(self):
-            return True
-
-        def _take(self):
-            self.taken.append({name: p.detach().clone() for name, p in self.model.policy.named_parameters()})
-
-        def _on_rollout_start(self):
-            if self.model.n_iterations > 0:
-                self._take()
-
-        def _on_training_end(self):
-            self._take()
-
-    model = make_model(pendulum_trajectories(), discriminator_update_interval=1)
-    averages, snapshots = WeightAverages((0.0, 0.5, 1.0)), Snapshots()
-    model.learn(3 * model.n_steps * model.n_envs, callback=[snapshots, averages])
-    first, second, third = snapshots.taken
-    assert any(not th.equal(first[name], third[name]) for name in first)  # the updates moved the weights
-    live = model.policy.state_dict()
-    for name in first:
-        blend = 0.25 * first[name] + 0.25 * second[name] + 0.5 * third[name]
-        th.testing.assert_close(averages.averaged_state(0.0)[name], first[name])
-        th.testing.assert_close(averages.averaged_state(0.5)[name], blend)
-        th.testing.assert_close(averages.averaged_state(1.0)[name], live[name])
-    buffers = dict(model.policy.named_buffers())
-    assert buffers and all(th.equal(averages.averaged_state(0.0)[name], buffer) for name, buffer in buffers.items())
+    demos = pendulum_trajectories()
+    averages = WeightAverages((0.2, 1.0))
+    live = make_model(demos, n_envs=2).learn(96, callback=averages)
+    for rate, average in averages.averages.items():
+        kept = make_model(demos, n_envs=2, policy_average_rate=rate).learn(96).policy_average
+        assert all(th.equal(a, b) for a, b in zip(average.state_dict().values(), kept.state_dict().values()))
+    assert all(th.equal(a, b) for a, b in zip(averages.averages[1.0].policy.parameters(), live.policy.parameters()))
