@@ -422,8 +422,8 @@ def average_lines(runs: List[Dict[str, Any]]) -> List[str]:
     for run in averaged:
         scores = ", ".join(f"rate {rate} {score:.2f}" for rate, score, _, _ in run["average_scores"])
         lines.append(f"- `{run['variant']}` seed {run['seed']}: live weights {run['score']:.2f}; {scores}")
-    for index, (rate, *_) in enumerate(averaged[0]["average_scores"]):
-        differences = [run["average_scores"][index][1] - run["score"] for run in averaged]
+    for rate in sorted({rate for run in averaged for rate, *_ in run["average_scores"]}):
+        differences = [score - run["score"] for run in averaged for each, score, *_ in run["average_scores"] if each == rate]
         lines.append(f"- rate {rate}, score less the live weights': {format_ci(*mean_ci(differences), signed=True)} "
                      f"({len(differences)} runs)")  # fmt: skip
     return lines
