@@ -475,11 +475,18 @@ class MPAIL(BaseAlgorithm):
                 "train a new model to change it."
             )
         settings = cls._load_settings(kwargs)
-        new_average_rate = settings.pop("policy_average_rate", None) if data.get("policy_average_rate") is None else None
+        saved_rate = data.get("policy_average_rate")
+        asked_rate = settings.get("policy_average_rate", saved_rate)
+        check_arguments(policy_average_rate=(asked_rate, OPTIONAL_DECAY_FACTOR))
+        # a weight average asked of a file without one starts at the next update; one the file holds is loaded, then
+        # dropped where None is asked (predict plans with the live weights)
+        average_changes = (saved_rate is None) != (asked_rate is None)
+        if average_changes:
+            settings.pop("policy_average_rate")
         model = super().load(source, env, device, custom_objects, print_system_info, force_reset, **settings)
-        if new_average_rate is not None:  # the file holds no average to load: it starts at the next update
-            model.policy_average_rate = new_average_rate
-            model.policy_average = PolicyAverage(model.policy, new_average_rate)
+        if average_changes:
+            model.policy_average_rate = asked_rate
+            model.policy_average = None if asked_rate is None else PolicyAverage(model.policy, asked_rate)
         if "prior_use_terminations" in data and "prior_terminations" not in data:  # a file saved before its rename
             model.prior_terminations = "cut" if data["prior_use_terminations"] else "bootstrap"
             del model.prior_use_terminations

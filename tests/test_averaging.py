@@ -73,3 +73,16 @@ def test_a_model_saved_without_an_average_loads_with_one_that_starts_at_the_next
     loaded.learn(16, reset_num_timesteps=False)
     assert loaded.deployed_policy() is loaded.policy_average.policy
     assert all(th.equal(a, b) for a, b in zip(loaded.policy_average.policy.parameters(), loaded.policy.parameters()))
+
+
+def test_loading_with_another_rate_keeps_the_saved_average_and_none_drops_it(demos, tmp_path):
+    model = make_model(demos, policy_average_rate=0.3).learn(48)
+    model.save(tmp_path / "model")
+    faster = MPAIL.load(tmp_path / "model", device="cpu", policy_average_rate=0.6)
+    assert faster.policy_average.rate == 0.6 and faster.policy_average.is_started
+    saved = model.policy_average.policy.parameters()
+    assert all(th.equal(a, b) for a, b in zip(faster.policy_average.policy.parameters(), saved))
+    live = MPAIL.load(tmp_path / "model", device="cpu", policy_average_rate=None)
+    assert live.policy_average is None and live.deployed_policy() is live.policy
+    with pytest.raises(ValueError, match=r"policy_average_rate.*a number in \(0, 1\] or None"):
+        MPAIL.load(tmp_path / "model", device="cpu", policy_average_rate=0.0)
