@@ -190,7 +190,7 @@ VARIANTS: Dict[str, Dict[str, Any]] = {
         question="the entry scored with its live weights, and also with running averages of its policy's weights along "
         "the run (`--weight-averages`; the planner trains on the live weights): is the score's swing along a run "
         "averaged out?",
-        changes=dict(policy_average_rate=None),  # the score is the live weights' (the Hopper entry deploys an average)
+        changes={},
     ),
     "gradient-penalty": dict(
         question="a gradient penalty on the discriminator (weight 10, between expert and agent transitions) instead of "
@@ -471,9 +471,7 @@ def report(results_dir: Path) -> str:
             lines.append(f"| `{name}` | {VARIANTS[name]['question']} | {seeds} | " + " | ".join(cells) + " |")
         lines += checkpoint_lines(runs)
         lines += average_lines(runs)
-    lines += ["", "Every row's score is its live weights', as `predict` planned before `policy_average_rate`: the Hopper "
-              "entry's `defaults` runs ran before that entry deployed a weight average. Each run on one torch thread. "
-              "Training collapses: the runs whose mean training episode length (over "
+    lines += ["", "Each run on one torch thread. Training collapses: the runs whose mean training episode length (over "
               "the last 100 episodes, at each rollout's end), once past 100 steps, fell below a fifth of its peak; "
               "blank for runs that recorded no curve. †: runs evaluated by a version whose deterministic planning drew "
               "the same samples at every step, a worse planner (the lap scenario went 4.5 m off its path with it, 0.46 m "
