@@ -141,8 +141,8 @@ class MPAIL(BaseAlgorithm):
         moving average over training's updates, each weighing this much, from the first update's weights; see
         :class:`~sb3_mpail.averaging.PolicyAverage`) and :meth:`predict` plans with it, while the planner in training
         goes on with the live weights (``model.policy``). It is saved with the model. ``None``: ``predict`` plans with
-        the live weights. On Hopper 0.2 scored level with the live weights over 5 seeds, and slower averages (0.02,
-        0.05) lower (docs/learned-models.md)
+        the live weights. On Hopper 0.2 and 0.5 scored level with the live weights over 10 and 7 seeds, and slower averages
+        (0.02, 0.05) lower (docs/learned-models.md)
     :param stats_window_size: episodes averaged in the logged episode return
     :param tensorboard_log: tensorboard log folder
     :param policy_kwargs: keyword arguments of the policy (planner settings, ``dynamics``)
